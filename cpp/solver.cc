@@ -1,0 +1,444 @@
+// Ceres problem assembly and solving for all board models and camera rigs.
+#include "deformcal/cpp/bridge.h"
+
+#include <ceres/ceres.h>
+#include <glog/logging.h>
+
+#include <chrono>
+#include <cmath>
+#include <memory>
+#include <mutex>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <type_traits>
+#include <utility>
+#include <vector>
+
+#include "deformcal/cpp/board.h"
+#include "deformcal/cpp/camera.h"
+#include "deformcal/src/ffi.rs.h"
+
+namespace deformcal {
+namespace {
+
+template <class A, class B>
+struct Concat;
+template <int... A, int... B>
+struct Concat<std::integer_sequence<int, A...>, std::integer_sequence<int, B...>> {
+  using type = std::integer_sequence<int, A..., B...>;
+};
+
+// Residual of one observed corner.  Blocks: intrinsics, [camera-k-from-camera-0
+// if kRig], camera-0-from-board pose, then the board model's own blocks.
+template <class Board, bool kRig>
+class ReprojectionError {
+ public:
+  ReprojectionError(double u, double v, const double* x) : u_(u), v_(v), x_{x[0], x[1], x[2]} {}
+
+  template <typename T>
+  bool operator()(const T* const p0, const T* const p1, T* r) const {
+    const T* const p[] = {p0, p1};
+    return Evaluate(p, r);
+  }
+  template <typename T>
+  bool operator()(const T* const p0, const T* const p1, const T* const p2, T* r) const {
+    const T* const p[] = {p0, p1, p2};
+    return Evaluate(p, r);
+  }
+  template <typename T>
+  bool operator()(const T* const p0, const T* const p1, const T* const p2, const T* const p3,
+                  T* r) const {
+    const T* const p[] = {p0, p1, p2, p3};
+    return Evaluate(p, r);
+  }
+  template <typename T>
+  bool operator()(const T* const p0, const T* const p1, const T* const p2, const T* const p3,
+                  const T* const p4, T* r) const {
+    const T* const p[] = {p0, p1, p2, p3, p4};
+    return Evaluate(p, r);
+  }
+
+  static ceres::CostFunction* Create(double u, double v, const double* x) {
+    return Make(new ReprojectionError(u, v, x), BlockSizes{});
+  }
+
+ private:
+  static constexpr int kLeading = kRig ? 3 : 2;
+  using LeadingSizes =
+      std::conditional_t<kRig, std::integer_sequence<int, kIntrinsicsSize, kPoseSize, kPoseSize>,
+                         std::integer_sequence<int, kIntrinsicsSize, kPoseSize>>;
+  using BlockSizes = typename Concat<LeadingSizes, typename Board::Sizes>::type;
+
+  template <int... Ns>
+  static ceres::CostFunction* Make(ReprojectionError* f, std::integer_sequence<int, Ns...>) {
+    return new ceres::AutoDiffCostFunction<ReprojectionError, 2, Ns...>(f);
+  }
+
+  template <typename T>
+  bool Evaluate(const T* const* p, T* r) const {
+    T board[3];
+    Board::Point(x_, p + kLeading, board);
+    T xc[3];
+    TransformPoint(p[kLeading - 1], board, xc);
+    if constexpr (kRig) {
+      T xk[3];
+      TransformPoint(p[1], xc, xk);
+      xc[0] = xk[0];
+      xc[1] = xk[1];
+      xc[2] = xk[2];
+    }
+    T uv[2];
+    ProjectRadial3(p[0], xc, uv);
+    r[0] = T(u_) - uv[0];
+    r[1] = T(v_) - uv[1];
+    return true;
+  }
+
+  double u_, v_;
+  double x_[3];
+};
+
+// Working copies of the parameter tables; Ceres holds pointers into them.
+struct Params {
+  std::vector<double> intrinsics, camera_poses, frame_poses, deformations, corrections;
+
+  explicit Params(const ffi::ProblemData& d)
+      : intrinsics(d.intrinsics.begin(), d.intrinsics.end()),
+        camera_poses(d.camera_poses.begin(), d.camera_poses.end()),
+        frame_poses(d.frame_poses.begin(), d.frame_poses.end()),
+        deformations(d.deformations.begin(), d.deformations.end()),
+        corrections(d.corrections.begin(), d.corrections.end()) {}
+
+  void CopyTo(ffi::ProblemData& d) const {
+    std::copy(intrinsics.begin(), intrinsics.end(), d.intrinsics.begin());
+    std::copy(camera_poses.begin(), camera_poses.end(), d.camera_poses.begin());
+    std::copy(frame_poses.begin(), frame_poses.end(), d.frame_poses.begin());
+    std::copy(deformations.begin(), deformations.end(), d.deformations.begin());
+    std::copy(corrections.begin(), corrections.end(), d.corrections.begin());
+  }
+};
+
+[[noreturn]] void Fail(const std::string& what) { throw std::invalid_argument(what); }
+
+template <class Vec>
+void RequireSize(const Vec& v, size_t expected, const char* name) {
+  if (v.size() != expected) {
+    std::ostringstream s;
+    s << name << " has " << v.size() << " values, expected " << expected;
+    Fail(s.str());
+  }
+}
+
+template <class Vec>
+void RequireFinite(const Vec& v, const char* name) {
+  for (size_t i = 0; i < v.size(); ++i) {
+    if (!std::isfinite(v[i])) {
+      std::ostringstream s;
+      s << name << "[" << i << "] is not finite (" << v[i] << ")";
+      Fail(s.str());
+    }
+  }
+}
+
+int GaugeCornersNeeded(ffi::BoardModel model) {
+  switch (model) {
+    case ffi::BoardModel::Static:
+      return 3;
+    case ffi::BoardModel::Full:
+      return 2;
+    default:
+      return 0;
+  }
+}
+
+// Everything that would otherwise trip a CHECK deep inside Ceres.
+void Validate(const ffi::ProblemData& d, const ffi::SolveOptions& o) {
+  if (d.num_cameras == 0) Fail("the problem has no camera");
+  if (d.num_frames == 0) Fail("the problem has no image");
+  if (d.num_corners == 0) Fail("the board has no corner");
+  const size_t n = d.obs_uv.size() / 2;
+  if (n == 0) Fail("the problem has no observation");
+  RequireSize(d.obs_uv, 2 * n, "obs_uv");
+  RequireSize(d.obs_camera, n, "obs_camera");
+  RequireSize(d.obs_frame, n, "obs_frame");
+  RequireSize(d.obs_corner, n, "obs_corner");
+  RequireSize(d.board, 3 * d.num_corners, "board");
+  RequireSize(d.intrinsics, kIntrinsicsSize * d.num_cameras, "intrinsics");
+  RequireSize(d.camera_poses, kPoseSize * d.num_cameras, "camera_poses");
+  RequireSize(d.frame_poses, kPoseSize * d.num_frames, "frame_poses");
+  RequireSize(d.deformations, kParaboloidSize * d.num_frames, "deformations");
+  RequireSize(d.corrections, kCorrectionStride * d.num_corners, "corrections");
+  RequireFinite(d.obs_uv, "obs_uv");
+  RequireFinite(d.board, "board");
+  RequireFinite(d.intrinsics, "intrinsics");
+  RequireFinite(d.camera_poses, "camera_poses");
+  RequireFinite(d.frame_poses, "frame_poses");
+  RequireFinite(d.deformations, "deformations");
+  RequireFinite(d.corrections, "corrections");
+  for (size_t i = 0; i < n; ++i) {
+    if (d.obs_camera[i] >= d.num_cameras || d.obs_frame[i] >= d.num_frames ||
+        d.obs_corner[i] >= d.num_corners) {
+      std::ostringstream s;
+      s << "observation " << i << " refers to camera " << d.obs_camera[i] << ", frame "
+        << d.obs_frame[i] << ", corner " << d.obs_corner[i] << " outside the problem";
+      Fail(s.str());
+    }
+  }
+  const size_t gauge = static_cast<size_t>(GaugeCornersNeeded(d.model));
+  if (o.fix_gauge && !d.fix_corrections && d.gauge_corners.size() < gauge) {
+    Fail("the board model needs " + std::to_string(gauge) + " gauge corners");
+  }
+  for (size_t i = 0; i < d.gauge_corners.size(); ++i) {
+    if (d.gauge_corners[i] >= d.num_corners) Fail("gauge corner outside the board");
+    for (size_t k = 0; k < i; ++k) {
+      if (d.gauge_corners[i] == d.gauge_corners[k]) Fail("gauge corners must be distinct");
+    }
+  }
+  for (uint32_t c : d.frozen_corners) {
+    if (c >= d.num_corners) Fail("frozen corner outside the board");
+  }
+  if (o.loss == ffi::LossKind::Cauchy && !(o.loss_scale_px > 0.0 && std::isfinite(o.loss_scale_px))) {
+    Fail("loss_scale_px must be a positive number");
+  }
+  if (o.num_threads < 1) Fail("num_threads must be at least 1");
+  if (o.max_iterations < 0) Fail("max_iterations must not be negative");
+  if (!(o.function_tolerance >= 0.0) || !(o.parameter_tolerance >= 0.0) ||
+      !(o.gradient_tolerance >= 0.0)) {
+    Fail("solver tolerances must be non-negative numbers");
+  }
+}
+
+void SilenceGlogOnce() {
+  static std::once_flag once;
+  // Without InitGoogleLogging glog writes to stderr; errors and worse only,
+  // so Ceres' chatter never reaches a CLI user.
+  std::call_once(once, [] { FLAGS_minloglevel = google::GLOG_ERROR; });
+}
+
+// The assembled problem with the bookkeeping the solver and evaluator need.
+struct Assembled {
+  std::unique_ptr<ceres::Problem> problem;
+  std::vector<ceres::ResidualBlockId> residuals;
+  std::vector<double*> frame_pose_blocks;
+  std::vector<double*> correction_blocks;  // free (non-constant) corrections
+  int correction_dim = 0;
+};
+
+template <class Board>
+void AddResiduals(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params& p,
+                  Assembled& a) {
+  ceres::LossFunction* loss =
+      o.loss == ffi::LossKind::Cauchy ? new ceres::CauchyLoss(o.loss_scale_px) : nullptr;
+  const size_t n = d.obs_uv.size() / 2;
+  std::vector<double*> blocks;
+  std::vector<bool> corner_used(d.num_corners, false);
+  std::vector<bool> frame_used(d.num_frames, false);
+  a.residuals.reserve(n);
+  for (size_t i = 0; i < n; ++i) {
+    const uint32_t cam = d.obs_camera[i], frame = d.obs_frame[i], corner = d.obs_corner[i];
+    blocks.clear();
+    blocks.push_back(&p.intrinsics[kIntrinsicsSize * cam]);
+    if (cam > 0) blocks.push_back(&p.camera_poses[kPoseSize * cam]);
+    blocks.push_back(&p.frame_poses[kPoseSize * frame]);
+    for (int b = 0; b < Board::kNumBlocks; ++b) {
+      blocks.push_back(Board::kOwners[b] == BlockOwner::kCorner
+                           ? &p.corrections[kCorrectionStride * corner]
+                           : &p.deformations[kParaboloidSize * frame]);
+    }
+    const double* x = &d.board[3 * corner];
+    ceres::CostFunction* cost =
+        cam > 0 ? ReprojectionError<Board, true>::Create(d.obs_uv[2 * i], d.obs_uv[2 * i + 1], x)
+                : ReprojectionError<Board, false>::Create(d.obs_uv[2 * i], d.obs_uv[2 * i + 1], x);
+    a.residuals.push_back(a.problem->AddResidualBlock(cost, loss, blocks));
+    corner_used[corner] = true;
+    frame_used[frame] = true;
+  }
+  ceres::Problem& problem = *a.problem;
+  for (uint32_t f = 0; f < d.num_frames; ++f) {
+    if (frame_used[f]) a.frame_pose_blocks.push_back(&p.frame_poses[kPoseSize * f]);
+  }
+  for (size_t k = 0; k < d.num_cameras; ++k) {
+    double* intr = &p.intrinsics[kIntrinsicsSize * k];
+    if (d.fix_intrinsics && problem.HasParameterBlock(intr)) problem.SetParameterBlockConstant(intr);
+    double* pose = &p.camera_poses[kPoseSize * k];
+    if (k > 0 && d.fix_camera_poses && problem.HasParameterBlock(pose)) {
+      problem.SetParameterBlockConstant(pose);
+    }
+  }
+  bool has_corner_blocks = false, has_frame_blocks = false;
+  for (int b = 0; b < Board::kNumBlocks; ++b) {
+    (Board::kOwners[b] == BlockOwner::kCorner ? has_corner_blocks : has_frame_blocks) = true;
+  }
+  if (has_frame_blocks && d.fix_deformations) {
+    for (uint32_t f = 0; f < d.num_frames; ++f) {
+      if (frame_used[f]) problem.SetParameterBlockConstant(&p.deformations[kParaboloidSize * f]);
+    }
+  }
+  if (has_corner_blocks) {
+    if (d.fix_corrections) {
+      for (uint32_t c = 0; c < d.num_corners; ++c) {
+        if (corner_used[c]) problem.SetParameterBlockConstant(&p.corrections[kCorrectionStride * c]);
+      }
+    } else {
+      for (uint32_t c : d.frozen_corners) {
+        if (corner_used[c]) problem.SetParameterBlockConstant(&p.corrections[kCorrectionStride * c]);
+      }
+      if (o.fix_gauge) {
+        for (uint32_t c : d.gauge_corners) {
+          if (!corner_used[c]) Fail("gauge corner " + std::to_string(c) + " is never observed");
+        }
+        Board::FixGauge(problem, p.corrections.data(), std::vector<uint32_t>(d.gauge_corners.begin(), d.gauge_corners.end()));
+      }
+      for (uint32_t c = 0; c < d.num_corners; ++c) {
+        double* block = &p.corrections[kCorrectionStride * c];
+        if (corner_used[c] && !problem.IsParameterBlockConstant(block)) {
+          a.correction_blocks.push_back(block);
+        }
+      }
+      a.correction_dim = problem.ParameterBlockSize(a.correction_blocks.empty()
+                                                        ? &p.corrections[0]
+                                                        : a.correction_blocks.front());
+    }
+  }
+}
+
+Assembled Assemble(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params& p) {
+  Validate(d, o);
+  SilenceGlogOnce();
+  Assembled a;
+  a.problem = std::make_unique<ceres::Problem>();
+  switch (d.model) {
+    case ffi::BoardModel::Standard:
+      AddResiduals<StandardBoard>(d, o, p, a);
+      break;
+    case ffi::BoardModel::Static:
+      AddResiduals<StaticBoard>(d, o, p, a);
+      break;
+    case ffi::BoardModel::Dynamic:
+      AddResiduals<DynamicBoard>(d, o, p, a);
+      break;
+    case ffi::BoardModel::Full:
+      AddResiduals<FullBoard>(d, o, p, a);
+      break;
+    default:
+      Fail("unknown board model");
+  }
+  return a;
+}
+
+// Schur elimination of whichever independent set of blocks (image poses or
+// corner corrections) leaves the smaller reduced system; dense below a size
+// where the reduced matrix fits comfortably, sparse above it.
+void ChooseLinearSolver(const Assembled& a, ceres::Solver::Options& s) {
+  ceres::Problem& problem = *a.problem;
+  std::vector<double*> all;
+  problem.GetParameterBlocks(&all);
+  int total = 0, free_poses = 0, free_corrections = 0;
+  for (double* b : all) {
+    if (problem.IsParameterBlockConstant(b)) continue;
+    total += problem.ParameterBlockTangentSize(b);
+  }
+  for (double* b : a.frame_pose_blocks) {
+    if (!problem.IsParameterBlockConstant(b)) free_poses += problem.ParameterBlockTangentSize(b);
+  }
+  for (double* b : a.correction_blocks) free_corrections += problem.ParameterBlockTangentSize(b);
+
+  const int reduced_poses = total - free_poses;
+  const int reduced_corrections = total - free_corrections;
+  const bool eliminate_corrections = free_corrections > 0 && reduced_corrections < reduced_poses;
+  const std::vector<double*>& eliminated =
+      eliminate_corrections ? a.correction_blocks : a.frame_pose_blocks;
+  const int reduced = eliminate_corrections ? reduced_corrections : reduced_poses;
+  if (reduced == 0) {
+    // Only independent per-image blocks are free (e.g. a poses-only refit).
+    s.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+    return;
+  }
+  auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
+  for (double* b : all) ordering->AddElementToGroup(b, 1);
+  for (double* b : eliminated) ordering->AddElementToGroup(b, 0);
+  s.linear_solver_ordering = ordering;
+  s.linear_solver_type = reduced <= 1200 ? ceres::DENSE_SCHUR : ceres::SPARSE_SCHUR;
+}
+
+ceres::Solver::Options MakeSolverOptions(const ffi::SolveOptions& o) {
+  ceres::Solver::Options s;
+  s.max_num_iterations = o.max_iterations;
+  s.function_tolerance = o.function_tolerance;
+  s.gradient_tolerance = o.gradient_tolerance;
+  s.parameter_tolerance = o.parameter_tolerance;
+  s.num_threads = o.num_threads;
+  s.minimizer_progress_to_stdout = false;  // stdout belongs to the CLI
+  s.logging_type = o.verbose ? ceres::PER_MINIMIZER_ITERATION : ceres::SILENT;
+  return s;
+}
+
+}  // namespace
+
+namespace ffi {
+
+SolveReport solve(ProblemData& data, const SolveOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  Params params(data);
+  Assembled a = Assemble(data, options, params);
+  ceres::Solver::Options s = MakeSolverOptions(options);
+  ChooseLinearSolver(a, s);
+  std::string why;
+  if (!s.IsValid(&why)) Fail("invalid solver options: " + why);
+  if (options.verbose) FLAGS_minloglevel = google::GLOG_INFO;
+  ceres::Solver::Summary summary;
+  ceres::Solve(s, a.problem.get(), &summary);
+
+  SolveReport report;
+  report.usable = summary.IsSolutionUsable();
+  report.converged = summary.termination_type == ceres::CONVERGENCE;
+  report.iterations = static_cast<int32_t>(summary.iterations.size()) - 1;
+  report.initial_cost = summary.initial_cost;
+  report.final_cost = summary.final_cost;
+  report.message = rust::String(summary.message);
+  report.linear_solver = rust::String(ceres::LinearSolverTypeToString(summary.linear_solver_type_used));
+  if (report.usable) {
+    for (double v : params.intrinsics) report.usable = report.usable && std::isfinite(v);
+    for (double v : params.frame_poses) report.usable = report.usable && std::isfinite(v);
+    if (!report.usable) report.message = rust::String("the solve produced non-finite parameters");
+  }
+  if (report.usable) params.CopyTo(data);
+  report.seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return report;
+}
+
+Evaluation evaluate(const ProblemData& data, const SolveOptions& options, bool with_jacobian) {
+  Params params(data);
+  Assembled a = Assemble(data, options, params);
+  ceres::Problem::EvaluateOptions e;
+  e.residual_blocks = a.residuals;
+  e.apply_loss_function = false;
+  e.num_threads = options.num_threads;
+  std::vector<double*> all;
+  a.problem->GetParameterBlocks(&all);
+  for (double* b : all) {
+    if (!a.problem->IsParameterBlockConstant(b)) e.parameter_blocks.push_back(b);
+  }
+  double cost = 0.0;
+  std::vector<double> residuals;
+  ceres::CRSMatrix jacobian;
+  if (!a.problem->Evaluate(e, &cost, &residuals, nullptr, with_jacobian ? &jacobian : nullptr)) {
+    Fail("the residuals could not be evaluated (a point behind the camera?)");
+  }
+  Evaluation out;
+  out.cost = cost;
+  for (double r : residuals) out.residuals.push_back(r);
+  if (with_jacobian) {
+    out.jacobian_rows = static_cast<size_t>(jacobian.num_rows);
+    out.jacobian_cols = static_cast<size_t>(jacobian.num_cols);
+    for (int v : jacobian.rows) out.jacobian_row_ptr.push_back(static_cast<uint32_t>(v));
+    for (int v : jacobian.cols) out.jacobian_col_idx.push_back(static_cast<uint32_t>(v));
+    for (double v : jacobian.values) out.jacobian_values.push_back(v);
+  }
+  return out;
+}
+
+}  // namespace ffi
+}  // namespace deformcal

@@ -1,0 +1,460 @@
+//! The TOML config (SPEC §5): typed, unknown keys rejected, values checked by key.
+use crate::deformation::Method;
+use crate::error::{Error, Result};
+use crate::synthetic::Preset;
+use crate::target::Target;
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+/// A camera of the rig as the config describes it.
+#[derive(Debug, Clone, PartialEq, Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraSpec {
+    pub name: String,
+    pub width: u32,
+    pub height: u32,
+    #[serde(default = "default_model")]
+    pub model: String,
+}
+
+fn default_model() -> String {
+    "radial3".into()
+}
+
+/// Robust loss choice.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Loss {
+    /// Plain least squares.
+    None,
+    /// Cauchy loss with `loss_scale_px`.
+    Cauchy,
+}
+
+/// `[calibration]`: the method and the solver settings.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CalibrationConfig {
+    pub method: Method,
+    pub loss: Loss,
+    pub loss_scale_px: f64,
+    /// Ceres threads for one solve.
+    pub threads: usize,
+    pub max_iterations: u32,
+    pub function_tolerance: f64,
+    pub gradient_tolerance: f64,
+    pub parameter_tolerance: f64,
+    /// Corners whose correction fixes the gauge; default: SPEC's corners.
+    pub gauge_corners: Option<Vec<usize>>,
+    /// Print Ceres' per-iteration log to stderr.
+    pub verbose: bool,
+}
+
+impl Default for CalibrationConfig {
+    fn default() -> Self {
+        CalibrationConfig {
+            method: Method::Full,
+            loss: Loss::Cauchy,
+            loss_scale_px: 1.0,
+            threads: 1,
+            max_iterations: 100,
+            function_tolerance: 1e-10,
+            gradient_tolerance: 1e-12,
+            parameter_tolerance: 1e-10,
+            gauge_corners: None,
+            verbose: false,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawData {
+    observations: Option<PathBuf>,
+    synthetic: Option<String>,
+    images: Option<usize>,
+    seed: Option<u64>,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawReference {
+    observations: Option<PathBuf>,
+    synthetic: Option<String>,
+    images: Option<usize>,
+    seed: Option<u64>,
+    rows: Option<usize>,
+    cols: Option<usize>,
+    spacing: Option<f64>,
+}
+
+/// `[protocol]`: the evaluation protocol (SPEC §4).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ProtocolConfig {
+    pub subsets: usize,
+    pub images_per_subset: usize,
+    pub seed: u64,
+    pub methods: Vec<Method>,
+}
+
+impl Default for ProtocolConfig {
+    fn default() -> Self {
+        ProtocolConfig {
+            subsets: 50,
+            images_per_subset: 25,
+            seed: 7,
+            methods: Method::ALL.to_vec(),
+        }
+    }
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawOutput {
+    dir: PathBuf,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawConfig {
+    target: Option<Target>,
+    #[serde(default)]
+    cameras: Vec<CameraSpec>,
+    data: RawData,
+    reference: Option<RawReference>,
+    #[serde(default)]
+    calibration: CalibrationConfig,
+    protocol: Option<ProtocolConfig>,
+    output: Option<RawOutput>,
+}
+
+/// Where observations come from.
+#[derive(Debug, Clone, PartialEq)]
+pub enum DataSource {
+    /// An observations CSV (path resolved against the config's folder).
+    Observations(PathBuf),
+    /// A built-in synthetic preset.
+    Synthetic {
+        preset: Preset,
+        images: Option<usize>,
+        seed: u64,
+    },
+}
+
+/// `[reference]`: the static reference set and its board.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReferenceConfig {
+    pub source: DataSource,
+    pub target: Target,
+}
+
+/// A checked config with paths resolved.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Config {
+    pub path: PathBuf,
+    pub target: Target,
+    pub cameras: Vec<CameraSpec>,
+    pub data: DataSource,
+    pub reference: Option<ReferenceConfig>,
+    pub calibration: CalibrationConfig,
+    pub protocol: Option<ProtocolConfig>,
+    pub output_dir: PathBuf,
+}
+
+/// Seed of synthetic data when the config gives none.
+pub const DEFAULT_SYNTHETIC_SEED: u64 = 1;
+
+fn line_of(text: &str, offset: usize) -> usize {
+    text[..offset.min(text.len())].matches('\n').count() + 1
+}
+
+impl Config {
+    /// Reads and checks a config file.
+    pub fn load(path: &Path) -> Result<Config> {
+        let text = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        let text = String::from_utf8(text).map_err(|_| Error::Config {
+            path: path.into(),
+            message: "not a UTF-8 text file".into(),
+        })?;
+        Config::parse(&text, path)
+    }
+
+    /// Parses config text; `path` names the file in messages and anchors relative paths.
+    pub fn parse(text: &str, path: &Path) -> Result<Config> {
+        let raw: RawConfig = toml::from_str(text).map_err(|e| {
+            let message = e.message().trim().to_string();
+            let message = match e.span() {
+                Some(span) => format!("line {}: {}", line_of(text, span.start), message),
+                None => message,
+            };
+            Error::Config {
+                path: path.into(),
+                message,
+            }
+        })?;
+        let base = path.parent().unwrap_or(Path::new("")).to_path_buf();
+        Checker { path, base }.check(raw)
+    }
+}
+
+struct Checker<'a> {
+    path: &'a Path,
+    base: PathBuf,
+}
+
+impl Checker<'_> {
+    fn err(&self, message: String) -> Error {
+        Error::Config {
+            path: self.path.into(),
+            message,
+        }
+    }
+
+    fn source(
+        &self,
+        table: &str,
+        observations: Option<PathBuf>,
+        synthetic: Option<String>,
+        images: Option<usize>,
+        seed: Option<u64>,
+    ) -> Result<DataSource> {
+        match (observations, synthetic) {
+            (Some(_), Some(_)) => Err(self.err(format!(
+                "[{table}] has both `observations` and `synthetic`; give one"
+            ))),
+            (None, None) => Err(self.err(format!(
+                "[{table}] needs `observations` (a CSV file) or `synthetic` (a preset)"
+            ))),
+            (Some(p), None) => {
+                if images.is_some() || seed.is_some() {
+                    return Err(self.err(format!(
+                        "{table}.images and {table}.seed apply to synthetic data only"
+                    )));
+                }
+                Ok(DataSource::Observations(self.base.join(p)))
+            }
+            (None, Some(name)) => {
+                let preset = Preset::parse(&name).ok_or_else(|| {
+                    self.err(format!(
+                        "{table}.synthetic: unknown preset `{name}` (expected one of {})",
+                        Preset::NAMES.join(", ")
+                    ))
+                })?;
+                if images == Some(0) {
+                    return Err(self.err(format!("{table}.images must be at least 1")));
+                }
+                Ok(DataSource::Synthetic {
+                    preset,
+                    images,
+                    seed: seed.unwrap_or(DEFAULT_SYNTHETIC_SEED),
+                })
+            }
+        }
+    }
+
+    fn check_target(&self, table: &str, t: &Target) -> Result<()> {
+        if t.rows < 2 || t.cols < 2 {
+            return Err(self.err(format!(
+                "{table}.rows and {table}.cols must be at least 2 (got {} × {})",
+                t.rows, t.cols
+            )));
+        }
+        if t.rows * t.cols > 1_000_000 {
+            return Err(self.err(format!(
+                "{table}: a board of {} × {} corners is too large",
+                t.rows, t.cols
+            )));
+        }
+        if !(t.spacing.is_finite() && t.spacing > 0.0) {
+            return Err(self.err(format!(
+                "{table}.spacing must be a positive length in metres (got {})",
+                t.spacing
+            )));
+        }
+        Ok(())
+    }
+
+    fn check(&self, raw: RawConfig) -> Result<Config> {
+        let data = self.source(
+            "data",
+            raw.data.observations,
+            raw.data.synthetic,
+            raw.data.images,
+            raw.data.seed,
+        )?;
+        let (target, cameras) = match &data {
+            DataSource::Synthetic { preset, .. } => {
+                let spec = preset.spec();
+                if let Some(t) = &raw.target {
+                    if *t != spec.target {
+                        return Err(self.err(format!(
+                            "[target] differs from the `{}` preset's board ({} × {}, {} m); remove it or use observations",
+                            preset.name(), spec.target.rows, spec.target.cols, spec.target.spacing
+                        )));
+                    }
+                }
+                let cameras = if raw.cameras.is_empty() {
+                    preset.cameras()
+                } else {
+                    raw.cameras.clone()
+                };
+                (spec.target, cameras)
+            }
+            DataSource::Observations(_) => {
+                let t = raw
+                    .target
+                    .ok_or_else(|| self.err("missing table [target]".into()))?;
+                if raw.cameras.is_empty() {
+                    return Err(
+                        self.err("missing [[cameras]]: at least one camera is needed".into())
+                    );
+                }
+                (t, raw.cameras.clone())
+            }
+        };
+        self.check_target("target", &target)?;
+        for (k, c) in cameras.iter().enumerate() {
+            if c.name.trim().is_empty() {
+                return Err(self.err(format!("cameras[{k}].name must not be empty")));
+            }
+            if cameras[..k].iter().any(|o| o.name == c.name) {
+                return Err(self.err(format!("cameras[{k}].name `{}` is used twice", c.name)));
+            }
+            if c.width == 0 || c.height == 0 {
+                return Err(self.err(format!(
+                    "cameras[{k}] ({}): width and height must be positive",
+                    c.name
+                )));
+            }
+            if c.model != "radial3" {
+                return Err(self.err(format!(
+                    "cameras[{k}].model: unknown lens model `{}` (supported: radial3)",
+                    c.model
+                )));
+            }
+        }
+
+        let reference = match raw.reference {
+            None => None,
+            Some(r) => {
+                let source =
+                    self.source("reference", r.observations, r.synthetic, r.images, r.seed)?;
+                let default_target = match &source {
+                    DataSource::Synthetic { preset, .. } => preset.spec().target,
+                    DataSource::Observations(_) => target,
+                };
+                let t = Target {
+                    rows: r.rows.unwrap_or(default_target.rows),
+                    cols: r.cols.unwrap_or(default_target.cols),
+                    spacing: r.spacing.unwrap_or(default_target.spacing),
+                };
+                self.check_target("reference", &t)?;
+                Some(ReferenceConfig { source, target: t })
+            }
+        };
+
+        let c = &raw.calibration;
+        if !(c.loss_scale_px.is_finite() && c.loss_scale_px > 0.0) {
+            return Err(self.err(format!(
+                "calibration.loss_scale_px must be positive (got {})",
+                c.loss_scale_px
+            )));
+        }
+        if c.threads == 0 || c.threads > 256 {
+            return Err(self.err(format!(
+                "calibration.threads must be 1 to 256 (got {})",
+                c.threads
+            )));
+        }
+        for (key, v) in [
+            ("function_tolerance", c.function_tolerance),
+            ("gradient_tolerance", c.gradient_tolerance),
+            ("parameter_tolerance", c.parameter_tolerance),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(self.err(format!(
+                    "calibration.{key} must be a non-negative number (got {v})"
+                )));
+            }
+        }
+        if let Some(g) = &c.gauge_corners {
+            let need = c.method.gauge_corners();
+            if g.len() < need {
+                return Err(self.err(format!(
+                    "calibration.gauge_corners: method `{}` needs {need} corners (got {})",
+                    c.method,
+                    g.len()
+                )));
+            }
+            if let Some(bad) = g.iter().find(|&&i| i >= target.num_corners()) {
+                return Err(self.err(format!(
+                    "calibration.gauge_corners: corner {bad} is not on the {} × {} board",
+                    target.rows, target.cols
+                )));
+            }
+        }
+        if let Some(p) = &raw.protocol {
+            if p.subsets == 0 || p.images_per_subset == 0 {
+                return Err(self.err(
+                    "protocol.subsets and protocol.images_per_subset must be positive".into(),
+                ));
+            }
+            if p.methods.is_empty() {
+                return Err(self.err("protocol.methods must name at least one method".into()));
+            }
+        }
+        let output_dir = match raw.output {
+            Some(o) => self.base.join(o.dir),
+            None => self.base.join("out"),
+        };
+        Ok(Config {
+            path: self.path.into(),
+            target,
+            cameras,
+            data,
+            reference,
+            calibration: raw.calibration,
+            protocol: raw.protocol,
+            output_dir,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<Config> {
+        Config::parse(text, Path::new("/tmp/x/c.toml"))
+    }
+
+    #[test]
+    fn unknown_key_is_named_with_line() {
+        let e = parse("[data]\nsynthetic = \"t2\"\n[calibration]\nmethdo = \"full\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("methdo"), "{e}");
+        assert!(e.contains("line 4"), "{e}");
+    }
+
+    #[test]
+    fn relative_paths_follow_the_config() {
+        let c = parse(
+            "[target]\nrows=3\ncols=4\nspacing=0.1\n[[cameras]]\nname=\"c\"\nwidth=10\nheight=10\n[data]\nobservations=\"o.csv\"\n[output]\ndir=\"out/a\"\n",
+        )
+        .unwrap();
+        assert_eq!(c.data, DataSource::Observations("/tmp/x/o.csv".into()));
+        assert_eq!(c.output_dir, PathBuf::from("/tmp/x/out/a"));
+    }
+
+    #[test]
+    fn bad_values_name_their_key() {
+        let e = parse("[target]\nrows=0\ncols=4\nspacing=0.1\n[[cameras]]\nname=\"c\"\nwidth=10\nheight=10\n[data]\nobservations=\"o.csv\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("target.rows"), "{e}");
+        let e = parse("[data]\nsynthetic=\"t9\"\n").unwrap_err().to_string();
+        assert!(e.contains("data.synthetic") && e.contains("t9"), "{e}");
+    }
+}

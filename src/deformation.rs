@@ -1,0 +1,138 @@
+//! Deformation models: the four calibration methods and the per-image paraboloid (SPEC §2).
+use crate::ffi::bridge::BoardModel;
+use crate::target::Target;
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+use std::fmt;
+
+/// A calibration method: which board deformation is modelled.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, PartialOrd, Ord)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    /// Rigid, planar board.
+    Standard,
+    /// One 3D correction per corner for the whole dataset.
+    Static,
+    /// A paraboloid out-of-plane bend per image.
+    Dynamic,
+    /// Static in-plane correction plus the per-image paraboloid.
+    Full,
+}
+
+impl Method {
+    /// All methods in the paper's order.
+    pub const ALL: [Method; 4] = [
+        Method::Standard,
+        Method::Static,
+        Method::Dynamic,
+        Method::Full,
+    ];
+
+    /// The name used in configs and outputs.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Standard => "standard",
+            Method::Static => "static",
+            Method::Dynamic => "dynamic",
+            Method::Full => "full",
+        }
+    }
+
+    /// Parses a method name.
+    pub fn parse(s: &str) -> Option<Method> {
+        Method::ALL.into_iter().find(|m| m.name() == s)
+    }
+
+    /// Whether the method estimates a per-corner correction.
+    pub fn has_correction(self) -> bool {
+        matches!(self, Method::Static | Method::Full)
+    }
+
+    /// Whether the method estimates a per-image paraboloid.
+    pub fn has_paraboloid(self) -> bool {
+        matches!(self, Method::Dynamic | Method::Full)
+    }
+
+    /// How many corners carry the gauge of the correction.
+    pub fn gauge_corners(self) -> usize {
+        match self {
+            Method::Static => 3,
+            Method::Full => 2,
+            _ => 0,
+        }
+    }
+
+    /// Components of the per-corner correction that are estimated.
+    pub fn correction_dims(self) -> usize {
+        match self {
+            Method::Static => 3,
+            Method::Full => 2,
+            _ => 0,
+        }
+    }
+
+    pub(crate) fn board_model(self) -> BoardModel {
+        match self {
+            Method::Standard => BoardModel::Standard,
+            Method::Static => BoardModel::Static,
+            Method::Dynamic => BoardModel::Dynamic,
+            Method::Full => BoardModel::Full,
+        }
+    }
+}
+
+impl fmt::Display for Method {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Out-of-plane bend Δz = a x² + b y² + c x y of one image.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Paraboloid {
+    pub a: f64,
+    pub b: f64,
+    pub c: f64,
+}
+
+impl Paraboloid {
+    /// Δz at board coordinates (x, y).
+    pub fn dz(&self, x: f64, y: f64) -> f64 {
+        self.a * x * x + self.b * y * y + self.c * x * y
+    }
+
+    /// `max_out_of_plane_m`: the largest |Δz| over the board's corners (SPEC §3).
+    pub fn max_out_of_plane(&self, target: &Target) -> f64 {
+        target
+            .nominal_points()
+            .iter()
+            .map(|p| self.dz(p.x, p.y).abs())
+            .fold(0.0, f64::max)
+    }
+
+    /// The three solver parameters.
+    pub fn to_array(&self) -> [f64; 3] {
+        [self.a, self.b, self.c]
+    }
+}
+
+/// Board point of a corner under a method's deformation: nominal + correction + bend.
+pub fn board_point(
+    method: Method,
+    nominal: &Vector3<f64>,
+    correction: &[f64; 3],
+    bend: &Paraboloid,
+) -> Vector3<f64> {
+    let mut p = *nominal;
+    match method {
+        Method::Standard => {}
+        Method::Static => p += Vector3::from(*correction),
+        Method::Dynamic => p.z += bend.dz(nominal.x, nominal.y),
+        Method::Full => {
+            p.x += correction[0];
+            p.y += correction[1];
+            p.z += bend.dz(nominal.x, nominal.y);
+        }
+    }
+    p
+}

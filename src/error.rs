@@ -1,0 +1,49 @@
+//! The library's error type: every failure names the file, line or key it concerns.
+use std::path::PathBuf;
+
+/// Everything that can go wrong between reading a config and writing a result.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// A config file that cannot be read, parsed or accepted.
+    #[error("{path}: {message}")]
+    Config { path: PathBuf, message: String },
+    /// A data file (CSV, corners) with a problem on a given line.
+    #[error("{path}:{line}: {message}")]
+    Data {
+        path: PathBuf,
+        line: u64,
+        message: String,
+    },
+    /// A file that cannot be read or written.
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// Data that cannot support the requested calibration.
+    #[error("degenerate data: {0}")]
+    Degenerate(String),
+    /// Initialisation could not produce a starting point.
+    #[error("initialisation failed: {0}")]
+    Init(String),
+    /// Ceres rejected the problem or could not solve it.
+    #[error("solver: {0}")]
+    Solver(String),
+    /// An argument outside its valid range.
+    #[error("invalid argument: {0}")]
+    Invalid(String),
+}
+
+/// Library result type.
+pub type Result<T> = std::result::Result<T, Error>;
+
+impl Error {
+    /// An I/O error on `path`.
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Error::Io {
+            path: path.into(),
+            source,
+        }
+    }
+}

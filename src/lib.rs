@@ -1,0 +1,48 @@
+//! deformcal: camera calibration with chessboards that bend while carried.
+//!
+//! Implements the four methods of Hagemann, Knorr and Stiller (WACV 2022) —
+//! `standard`, `static`, `dynamic`, `full` — over a Ceres core in C++.
+pub mod calibrate;
+pub mod camera;
+pub mod config;
+pub mod deformation;
+pub mod error;
+pub mod ffi;
+pub mod observations;
+pub mod output;
+pub mod problem;
+pub mod report;
+pub mod synthetic;
+pub mod target;
+pub mod zhang;
+
+pub use calibrate::{calibrate, Calibration, Request};
+pub use camera::{Intrinsics, Pose};
+pub use config::Config;
+pub use deformation::{Method, Paraboloid};
+pub use error::{Error, Result};
+pub use observations::{Dataset, Observation};
+pub use target::Target;
+
+use config::DataSource;
+
+/// Loads the dataset a data source names, for the given board and cameras.
+pub fn load_source(
+    source: &DataSource,
+    target: Target,
+    cameras: &[config::CameraSpec],
+) -> Result<(Dataset, Option<synthetic::Truth>)> {
+    match source {
+        DataSource::Observations(path) => {
+            Ok((Dataset::read_csv(path, target, cameras.to_vec())?, None))
+        }
+        DataSource::Synthetic {
+            preset,
+            images,
+            seed,
+        } => {
+            let (d, t) = synthetic::generate(*preset, *images, *seed);
+            Ok((d, Some(t)))
+        }
+    }
+}

@@ -1,0 +1,171 @@
+//! Result files: `calibration.json` (SPEC §5), written atomically.
+use crate::calibrate::{Calibration, Stage};
+use crate::camera::Intrinsics;
+use crate::deformation::Paraboloid;
+use crate::error::{Error, Result};
+use serde::{Deserialize, Serialize};
+use std::io::Write;
+use std::path::Path;
+
+/// Writes `bytes` to `path` through a temporary file and a rename, so a reader
+/// (or a crash) never sees a half-written file.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(|e| Error::io(dir, e))?;
+    tmp.write_all(bytes).map_err(|e| Error::io(path, e))?;
+    tmp.as_file().sync_all().map_err(|e| Error::io(path, e))?;
+    tmp.persist(path).map_err(|e| Error::io(path, e.error))?;
+    Ok(())
+}
+
+/// One camera in `calibration.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CameraJson {
+    pub name: String,
+    pub model: String,
+    pub width: u32,
+    pub height: u32,
+    pub intrinsics: Intrinsics,
+    pub rotation: [f64; 3],
+    pub translation: [f64; 3],
+}
+
+/// One frame in `calibration.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FrameJson {
+    pub frame: i64,
+    pub rotation: [f64; 3],
+    pub translation: [f64; 3],
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub deformation: Option<Paraboloid>,
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub max_out_of_plane_m: Option<f64>,
+    pub rmse_px: f64,
+    pub observations: usize,
+}
+
+/// The whole `calibration.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CalibrationJson {
+    pub method: String,
+    pub rmse_px: f64,
+    pub observations: usize,
+    pub converged: bool,
+    pub iterations: i32,
+    pub seconds: f64,
+    pub cameras: Vec<CameraJson>,
+    pub frames: Vec<FrameJson>,
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub static_correction: Option<Vec<[f64; 3]>>,
+    #[serde(skip_serializing_if = "Vec::is_empty", default)]
+    pub gauge_corners: Vec<usize>,
+    #[serde(skip_serializing_if = "Vec::is_empty", default)]
+    pub frozen_corners: Vec<usize>,
+    pub initial_intrinsics: Vec<Intrinsics>,
+    pub stages: Vec<StageJson>,
+    pub warnings: Vec<String>,
+}
+
+/// A solver stage in `calibration.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StageJson {
+    pub method: String,
+    pub converged: bool,
+    pub iterations: i32,
+    pub initial_cost: f64,
+    pub final_cost: f64,
+    pub seconds: f64,
+    pub linear_solver: String,
+    pub message: String,
+}
+
+impl From<&Stage> for StageJson {
+    fn from(s: &Stage) -> Self {
+        StageJson {
+            method: s.method.name().into(),
+            converged: s.converged,
+            iterations: s.iterations,
+            initial_cost: s.initial_cost,
+            final_cost: s.final_cost,
+            seconds: s.seconds,
+            linear_solver: s.linear_solver.clone(),
+            message: s.message.clone(),
+        }
+    }
+}
+
+impl From<&Calibration> for CalibrationJson {
+    fn from(c: &Calibration) -> Self {
+        let d = &c.dataset;
+        let mut sq = vec![0.0; d.num_frames()];
+        let mut n = vec![0usize; d.num_frames()];
+        for (o, r) in d.observations.iter().zip(c.residuals.chunks(2)) {
+            sq[o.frame] += r[0] * r[0] + r[1] * r[1];
+            n[o.frame] += 1;
+        }
+        let bends = c.method.has_paraboloid();
+        CalibrationJson {
+            method: c.method.name().into(),
+            rmse_px: c.rmse_px,
+            observations: d.observations.len(),
+            converged: c.converged,
+            iterations: c.iterations(),
+            seconds: c.seconds,
+            cameras: d
+                .cameras
+                .iter()
+                .enumerate()
+                .map(|(k, cam)| CameraJson {
+                    name: cam.name.clone(),
+                    model: cam.model.clone(),
+                    width: cam.width,
+                    height: cam.height,
+                    intrinsics: c.state.intrinsics[k],
+                    rotation: c.state.camera_poses[k].rotation,
+                    translation: c.state.camera_poses[k].translation,
+                })
+                .collect(),
+            frames: (0..d.num_frames())
+                .map(|j| {
+                    let pose = c.state.frame_poses[j];
+                    let bend = c.state.deformations[j];
+                    FrameJson {
+                        frame: d.frame_ids[j],
+                        rotation: pose.rotation,
+                        translation: pose.translation,
+                        deformation: bends.then_some(bend),
+                        max_out_of_plane_m: bends.then(|| bend.max_out_of_plane(&d.target)),
+                        rmse_px: if n[j] > 0 {
+                            (sq[j] / n[j] as f64).sqrt()
+                        } else {
+                            f64::NAN
+                        },
+                        observations: n[j],
+                    }
+                })
+                .collect(),
+            static_correction: c
+                .method
+                .has_correction()
+                .then(|| c.state.corrections.clone()),
+            gauge_corners: c.gauge.clone(),
+            frozen_corners: c.frozen.clone(),
+            initial_intrinsics: c.initial_intrinsics.clone(),
+            stages: c.stages.iter().map(StageJson::from).collect(),
+            warnings: c.warnings.clone(),
+        }
+    }
+}
+
+/// Writes `calibration.json` into `dir` (created if needed).
+pub fn write_calibration(dir: &Path, c: &Calibration) -> Result<std::path::PathBuf> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    let path = dir.join("calibration.json");
+    let json =
+        serde_json::to_string_pretty(&CalibrationJson::from(c)).expect("calibration serialises");
+    write_atomic(&path, json.as_bytes())?;
+    Ok(path)
+}

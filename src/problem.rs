@@ -1,0 +1,334 @@
+//! Problem assembly: turns a dataset, a method and a parameter state into the
+//! Ceres problem behind the bridge, and the solution back into typed values.
+use crate::camera::{Intrinsics, Pose};
+use crate::config::{CalibrationConfig, Loss};
+use crate::deformation::{Method, Paraboloid};
+use crate::error::{Error, Result};
+use crate::ffi::bridge::{self, LossKind, ProblemData, SolveOptions};
+use crate::observations::Dataset;
+use crate::target::Target;
+
+pub use crate::ffi::bridge::{Evaluation, SolveReport};
+
+/// Every parameter of a calibration: the state the solver refines.
+#[derive(Debug, Clone, PartialEq)]
+pub struct State {
+    /// θ_k per camera.
+    pub intrinsics: Vec<Intrinsics>,
+    /// π_k: camera-k-from-camera-0 (identity for camera 0).
+    pub camera_poses: Vec<Pose>,
+    /// Π_j: camera-0-from-board per frame.
+    pub frame_poses: Vec<Pose>,
+    /// β_j per frame (zero where the method has none).
+    pub deformations: Vec<Paraboloid>,
+    /// Δx_i per corner (zero where the method has none).
+    pub corrections: Vec<[f64; 3]>,
+}
+
+impl State {
+    /// A state with the given intrinsics and poses and no deformation.
+    pub fn rigid(
+        intrinsics: Vec<Intrinsics>,
+        camera_poses: Vec<Pose>,
+        frame_poses: Vec<Pose>,
+        target: &Target,
+    ) -> Self {
+        let frames = frame_poses.len();
+        State {
+            intrinsics,
+            camera_poses,
+            frame_poses,
+            deformations: vec![Paraboloid::default(); frames],
+            corrections: vec![[0.0; 3]; target.num_corners()],
+        }
+    }
+}
+
+/// Which parameter groups are held at their current values.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Hold {
+    pub intrinsics: bool,
+    pub camera_poses: bool,
+    pub corrections: bool,
+    pub deformations: bool,
+}
+
+/// Solver settings, from `[calibration]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SolverSettings {
+    pub loss: Loss,
+    pub loss_scale_px: f64,
+    pub threads: usize,
+    pub max_iterations: u32,
+    pub function_tolerance: f64,
+    pub gradient_tolerance: f64,
+    pub parameter_tolerance: f64,
+    /// Hold the gauge corners (always, except to demonstrate the rank defect).
+    pub fix_gauge: bool,
+    pub verbose: bool,
+}
+
+impl From<&CalibrationConfig> for SolverSettings {
+    fn from(c: &CalibrationConfig) -> Self {
+        SolverSettings {
+            loss: c.loss,
+            loss_scale_px: c.loss_scale_px,
+            threads: c.threads,
+            max_iterations: c.max_iterations,
+            function_tolerance: c.function_tolerance,
+            gradient_tolerance: c.gradient_tolerance,
+            parameter_tolerance: c.parameter_tolerance,
+            fix_gauge: true,
+            verbose: c.verbose,
+        }
+    }
+}
+
+impl Default for SolverSettings {
+    fn default() -> Self {
+        SolverSettings::from(&CalibrationConfig::default())
+    }
+}
+
+impl SolverSettings {
+    fn options(&self) -> SolveOptions {
+        SolveOptions {
+            loss: match self.loss {
+                Loss::None => LossKind::None,
+                Loss::Cauchy => LossKind::Cauchy,
+            },
+            loss_scale_px: self.loss_scale_px,
+            num_threads: self.threads.min(i32::MAX as usize) as i32,
+            max_iterations: self.max_iterations.min(i32::MAX as u32) as i32,
+            function_tolerance: self.function_tolerance,
+            gradient_tolerance: self.gradient_tolerance,
+            parameter_tolerance: self.parameter_tolerance,
+            fix_gauge: self.fix_gauge,
+            verbose: self.verbose,
+        }
+    }
+}
+
+/// One calibration problem: data, method, gauge and what is held fixed.
+#[derive(Debug, Clone)]
+pub struct Problem<'a> {
+    pub dataset: &'a Dataset,
+    pub method: Method,
+    /// Corners whose correction carries the gauge (see [`choose_gauge`]).
+    pub gauge: Vec<usize>,
+    /// Corners whose correction stays at its value: seen in too few images.
+    pub frozen: Vec<usize>,
+    pub hold: Hold,
+}
+
+/// Images observing each corner (any camera counted once per frame).
+pub fn frames_per_corner(dataset: &Dataset) -> Vec<usize> {
+    let mut seen = std::collections::HashSet::new();
+    let mut n = vec![0; dataset.target.num_corners()];
+    for o in &dataset.observations {
+        if seen.insert((o.frame, o.corner)) {
+            n[o.corner] += 1;
+        }
+    }
+    n
+}
+
+/// Minimum number of images a corner needs for its correction to be estimated.
+pub const MIN_VIEWS_PER_CORRECTION: usize = 2;
+
+/// Corners whose correction cannot be estimated (seen in fewer than two images).
+pub fn underobserved_corners(dataset: &Dataset) -> Vec<usize> {
+    frames_per_corner(dataset)
+        .iter()
+        .enumerate()
+        .filter(|(_, &n)| n < MIN_VIEWS_PER_CORRECTION)
+        .map(|(i, _)| i)
+        .collect()
+}
+
+/// The gauge corners: the requested ones, else the SPEC's defaults, each replaced by
+/// the nearest well-observed corner when the default is seen in fewer than two images.
+pub fn choose_gauge(
+    dataset: &Dataset,
+    method: Method,
+    requested: Option<&[usize]>,
+) -> Result<Vec<usize>> {
+    let need = method.gauge_corners();
+    if need == 0 {
+        return Ok(Vec::new());
+    }
+    let t = dataset.target;
+    let views = frames_per_corner(dataset);
+    if let Some(req) = requested {
+        let req = &req[..need.min(req.len())];
+        if let Some(&bad) = req
+            .iter()
+            .find(|&&c| c >= t.num_corners() || views[c] < MIN_VIEWS_PER_CORRECTION)
+        {
+            return Err(Error::Degenerate(format!(
+                "gauge corner {bad} is seen in fewer than {MIN_VIEWS_PER_CORRECTION} images; choose others in calibration.gauge_corners"
+            )));
+        }
+        check_gauge_geometry(&t, req)?;
+        return Ok(req.to_vec());
+    }
+    let mut chosen: Vec<usize> = Vec::with_capacity(need);
+    for &d in &t.default_gauge()[..need] {
+        let (dr, dc) = ((d / t.cols) as i64, (d % t.cols) as i64);
+        let best = (0..t.num_corners())
+            .filter(|&c| views[c] >= MIN_VIEWS_PER_CORRECTION && !chosen.contains(&c))
+            .min_by_key(|&c| {
+                let (r, col) = ((c / t.cols) as i64, (c % t.cols) as i64);
+                ((r - dr).pow(2) + (col - dc).pow(2), c)
+            })
+            .ok_or_else(|| {
+                Error::Degenerate(
+                    "too few corners are seen in two or more images to fix the gauge".into(),
+                )
+            })?;
+        chosen.push(best);
+    }
+    check_gauge_geometry(&t, &chosen)?;
+    Ok(chosen)
+}
+
+fn check_gauge_geometry(t: &Target, corners: &[usize]) -> Result<()> {
+    let p: Vec<_> = corners.iter().map(|&c| t.nominal(c)).collect();
+    for i in 0..p.len() {
+        for k in 0..i {
+            if corners[i] == corners[k] {
+                return Err(Error::Degenerate(format!(
+                    "gauge corner {} is given twice",
+                    corners[i]
+                )));
+            }
+        }
+    }
+    if p.len() == 3 && (p[1] - p[0]).cross(&(p[2] - p[0])).norm() < 1e-12 {
+        return Err(Error::Degenerate(format!(
+            "gauge corners {corners:?} are collinear; the static gauge needs three non-collinear corners"
+        )));
+    }
+    Ok(())
+}
+
+impl Problem<'_> {
+    fn data(&self, state: &State) -> Result<ProblemData> {
+        let d = self.dataset;
+        let t = d.target;
+        if state.intrinsics.len() != d.cameras.len()
+            || state.camera_poses.len() != d.cameras.len()
+            || state.frame_poses.len() != d.num_frames()
+            || state.deformations.len() != d.num_frames()
+            || state.corrections.len() != t.num_corners()
+        {
+            return Err(Error::Invalid(
+                "parameter state does not match the dataset".into(),
+            ));
+        }
+        let n = d.observations.len();
+        let mut data = ProblemData {
+            model: self.method.board_model(),
+            num_cameras: d.cameras.len(),
+            num_frames: d.num_frames(),
+            num_corners: t.num_corners(),
+            board: t
+                .nominal_points()
+                .iter()
+                .flat_map(|p| [p.x, p.y, p.z])
+                .collect(),
+            obs_camera: Vec::with_capacity(n),
+            obs_frame: Vec::with_capacity(n),
+            obs_corner: Vec::with_capacity(n),
+            obs_uv: Vec::with_capacity(2 * n),
+            intrinsics: state.intrinsics.iter().flat_map(|k| k.to_array()).collect(),
+            camera_poses: state
+                .camera_poses
+                .iter()
+                .flat_map(|p| p.to_array())
+                .collect(),
+            frame_poses: state
+                .frame_poses
+                .iter()
+                .flat_map(|p| p.to_array())
+                .collect(),
+            deformations: state
+                .deformations
+                .iter()
+                .flat_map(|p| p.to_array())
+                .collect(),
+            corrections: state.corrections.iter().flatten().copied().collect(),
+            gauge_corners: self.gauge.iter().map(|&c| c as u32).collect(),
+            frozen_corners: self.frozen.iter().map(|&c| c as u32).collect(),
+            fix_intrinsics: self.hold.intrinsics,
+            fix_camera_poses: self.hold.camera_poses,
+            fix_corrections: self.hold.corrections,
+            fix_deformations: self.hold.deformations,
+        };
+        for o in &d.observations {
+            data.obs_camera.push(o.camera as u32);
+            data.obs_frame.push(o.frame as u32);
+            data.obs_corner.push(o.corner as u32);
+            data.obs_uv.extend_from_slice(&o.uv);
+        }
+        Ok(data)
+    }
+
+    /// Refines `state` in place; an unusable solve is an error, a non-converged one is reported.
+    pub fn solve(&self, state: &mut State, settings: &SolverSettings) -> Result<SolveReport> {
+        let mut data = self.data(state)?;
+        let report = bridge::solve(&mut data, &settings.options())
+            .map_err(|e| Error::Solver(e.what().to_string()))?;
+        if !report.usable {
+            return Err(Error::Solver(format!(
+                "{} method failed: {}",
+                self.method, report.message
+            )));
+        }
+        for (k, chunk) in data.intrinsics.chunks(7).enumerate() {
+            state.intrinsics[k] = Intrinsics::from_slice(chunk);
+        }
+        for (k, chunk) in data.camera_poses.chunks(6).enumerate() {
+            state.camera_poses[k] = Pose::from_slice(chunk);
+        }
+        for (j, chunk) in data.frame_poses.chunks(6).enumerate() {
+            state.frame_poses[j] = Pose::from_slice(chunk);
+        }
+        if self.method.has_paraboloid() {
+            for (j, c) in data.deformations.chunks(3).enumerate() {
+                state.deformations[j] = Paraboloid {
+                    a: c[0],
+                    b: c[1],
+                    c: c[2],
+                };
+            }
+        }
+        if self.method.has_correction() {
+            for (i, c) in data.corrections.chunks(3).enumerate() {
+                state.corrections[i] = [c[0], c[1], c[2]];
+            }
+        }
+        Ok(report)
+    }
+
+    /// Residuals (observed − projected, per observation u then v) and optionally the Jacobian.
+    pub fn evaluate(
+        &self,
+        state: &State,
+        settings: &SolverSettings,
+        with_jacobian: bool,
+    ) -> Result<Evaluation> {
+        let data = self.data(state)?;
+        bridge::evaluate(&data, &settings.options(), with_jacobian)
+            .map_err(|e| Error::Solver(e.what().to_string()))
+    }
+}
+
+/// RMSE over observations of per-point Euclidean residuals (SPEC §3 `rmse_px`).
+pub fn rmse(residuals: &[f64]) -> f64 {
+    let n = residuals.len() / 2;
+    if n == 0 {
+        return f64::NAN;
+    }
+    (residuals.iter().map(|r| r * r).sum::<f64>() / n as f64).sqrt()
+}

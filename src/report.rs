@@ -1,0 +1,61 @@
+//! The short human summary printed after a calibration.
+use crate::calibrate::Calibration;
+use std::fmt::Write;
+
+/// Method, RMSE, intrinsics, deformation, iterations and time, as a few lines of text.
+pub fn summary(c: &Calibration) -> String {
+    let mut s = String::new();
+    let d = &c.dataset;
+    let _ = writeln!(
+        s,
+        "deformcal: method {} on {} image(s), {} observations",
+        c.method,
+        d.num_frames(),
+        d.observations.len()
+    );
+    let status = if c.converged {
+        "converged"
+    } else {
+        "NOT CONVERGED"
+    };
+    let _ = writeln!(
+        s,
+        "  {status} after {} iterations in {:.3} s; RMSE {:.4} px",
+        c.iterations(),
+        c.seconds,
+        c.rmse_px
+    );
+    for (k, cam) in d.cameras.iter().enumerate() {
+        let i = c.state.intrinsics[k];
+        let _ = writeln!(
+            s,
+            "  {} ({}×{}): fx {:.2}  fy {:.2}  cx {:.2}  cy {:.2}  k1 {:.5}  k2 {:.5}  k3 {:.5}",
+            cam.name, cam.width, cam.height, i.fx, i.fy, i.cx, i.cy, i.k1, i.k2, i.k3
+        );
+    }
+    if c.method.has_paraboloid() {
+        let _ = writeln!(
+            s,
+            "  max out-of-plane deformation: {:.3} mm",
+            c.max_out_of_plane() * 1e3
+        );
+    }
+    if c.method.has_correction() {
+        let max = c
+            .state
+            .corrections
+            .iter()
+            .map(|v| v.iter().map(|x| x * x).sum::<f64>().sqrt())
+            .fold(0.0, f64::max);
+        let _ = writeln!(
+            s,
+            "  largest static correction: {:.3} mm (gauge corners {:?})",
+            max * 1e3,
+            c.gauge
+        );
+    }
+    for w in &c.warnings {
+        let _ = writeln!(s, "  warning: {w}");
+    }
+    s
+}

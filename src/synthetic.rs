@@ -1,0 +1,354 @@
+//! Built-in synthetic datasets imitating the paper's targets T1–T4 and its reference set.
+//!
+//! Board sizes follow the paper's Fig. 3 caption, the per-image out-of-plane
+//! deformation magnitudes its Table S2 (mean ± std of the maximum Δz), the camera
+//! its Allied Vision MG-235B (1936×1216, 5.86 µm pixels) with a 17 mm lens.
+use crate::camera::{Intrinsics, Pose};
+use crate::config::CameraSpec;
+use crate::deformation::Paraboloid;
+use crate::error::Result;
+use crate::observations::Dataset;
+use crate::output::write_atomic;
+use crate::target::Target;
+use nalgebra::{Rotation3, Vector2, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// A built-in dataset.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Preset {
+    /// 1 m × 2 m styrofoam composite, carried.
+    T1,
+    /// 1 m × 1 m aluminium composite, carried.
+    T2,
+    /// 60 cm × 42 cm paper on cardboard (self-made), carried.
+    T3,
+    /// 37.5 cm × 25 cm aluminium composite, carried.
+    T4,
+    /// T2 lying still on the ground, camera moving; static error only.
+    Reference,
+}
+
+/// What a preset generates.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct PresetSpec {
+    pub target: Target,
+    /// Images in the full dataset.
+    pub images: usize,
+    /// Mean and standard deviation of each image's maximum |Δz| in metres.
+    pub bend_mean_m: f64,
+    pub bend_std_m: f64,
+    /// Standard deviation of the static print error, in-plane and out-of-plane, metres.
+    pub print_sigma_xy_m: f64,
+    pub print_sigma_z_m: f64,
+    /// In-plane offset of the right half of the board (two glued sheets), metres.
+    pub sheet_offset_m: [f64; 2],
+    /// Distance range of the board from the camera, metres.
+    pub distance_m: [f64; 2],
+    /// Detector noise per pixel coordinate.
+    pub noise_px: f64,
+}
+
+impl Preset {
+    /// Names accepted in configs.
+    pub const NAMES: [&'static str; 5] = ["t1", "t2", "t3", "t4", "reference"];
+
+    /// The config name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Preset::T1 => "t1",
+            Preset::T2 => "t2",
+            Preset::T3 => "t3",
+            Preset::T4 => "t4",
+            Preset::Reference => "reference",
+        }
+    }
+
+    /// Parses a config name.
+    pub fn parse(s: &str) -> Option<Preset> {
+        [
+            Preset::T1,
+            Preset::T2,
+            Preset::T3,
+            Preset::T4,
+            Preset::Reference,
+        ]
+        .into_iter()
+        .find(|p| p.name() == s)
+    }
+
+    /// The generation parameters.
+    pub fn spec(self) -> PresetSpec {
+        let base = PresetSpec {
+            target: Target {
+                rows: 13,
+                cols: 13,
+                spacing: 0.07,
+            },
+            images: 500,
+            bend_mean_m: 0.0,
+            bend_std_m: 0.0,
+            print_sigma_xy_m: 50e-6,
+            print_sigma_z_m: 100e-6,
+            sheet_offset_m: [0.0, 0.0],
+            distance_m: [1.5, 6.0],
+            noise_px: 0.15,
+        };
+        match self {
+            Preset::T1 => PresetSpec {
+                target: Target {
+                    rows: 11,
+                    cols: 22,
+                    spacing: 0.085,
+                },
+                bend_mean_m: 2.6e-3,
+                bend_std_m: 1.2e-3,
+                ..base
+            },
+            Preset::T2 => PresetSpec {
+                bend_mean_m: 1.7e-3,
+                bend_std_m: 2.4e-3,
+                ..base
+            },
+            Preset::T3 => PresetSpec {
+                target: Target {
+                    rows: 9,
+                    cols: 14,
+                    spacing: 0.04,
+                },
+                bend_mean_m: 3.0e-3,
+                bend_std_m: 2.1e-3,
+                print_sigma_xy_m: 200e-6,
+                print_sigma_z_m: 400e-6,
+                sheet_offset_m: [0.4e-3, -0.3e-3],
+                ..base
+            },
+            Preset::T4 => PresetSpec {
+                target: Target {
+                    rows: 7,
+                    cols: 11,
+                    spacing: 0.03,
+                },
+                bend_mean_m: 0.19e-3,
+                bend_std_m: 0.57e-3,
+                ..base
+            },
+            Preset::Reference => PresetSpec {
+                images: 650,
+                distance_m: [1.2, 4.0],
+                ..base
+            },
+        }
+    }
+
+    /// The camera(s) the preset simulates.
+    pub fn cameras(self) -> Vec<CameraSpec> {
+        vec![CameraSpec {
+            name: "cam0".into(),
+            width: 1936,
+            height: 1216,
+            model: "radial3".into(),
+        }]
+    }
+}
+
+/// The true intrinsics of the simulated 17 mm lens on 5.86 µm pixels.
+pub fn true_intrinsics() -> Intrinsics {
+    Intrinsics {
+        fx: 2901.0,
+        fy: 2899.5,
+        cx: 975.3,
+        cy: 601.8,
+        k1: -0.11,
+        k2: 0.14,
+        k3: -0.05,
+    }
+}
+
+/// Ground truth of a generated dataset.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Truth {
+    pub preset: String,
+    pub seed: u64,
+    pub noise_px: f64,
+    pub target: Target,
+    pub intrinsics: Vec<Intrinsics>,
+    /// Camera-k-from-camera-0.
+    pub camera_poses: Vec<Pose>,
+    /// Camera-0-from-board per frame (dense order, frame ids 0..n).
+    pub frame_poses: Vec<Pose>,
+    pub deformations: Vec<Paraboloid>,
+    /// The board's static deviation from the nominal grid, per corner.
+    pub corrections: Vec<[f64; 3]>,
+}
+
+impl Truth {
+    /// The true 3D board point of corner `i` in frame `j`.
+    pub fn board_point(&self, i: usize, j: usize) -> Vector3<f64> {
+        let n = self.target.nominal(i);
+        let c = self.corrections[i];
+        let bend = self.deformations[j];
+        Vector3::new(n.x + c[0], n.y + c[1], c[2] + bend.dz(n.x, n.y))
+    }
+}
+
+/// Everything a generator call may vary.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Generator {
+    pub spec: PresetSpec,
+    pub preset: Preset,
+    pub images: usize,
+    pub seed: u64,
+    pub intrinsics: Intrinsics,
+    /// Scales the per-image bend (0 gives a rigid board).
+    pub bend_scale: f64,
+    /// Scales the static print error (0 gives a perfect print).
+    pub print_scale: f64,
+    /// Minimum fraction of the corners that must fall in the image for a view.
+    pub min_visible: f64,
+    /// Detector noise per pixel coordinate.
+    pub noise_px: f64,
+}
+
+impl Generator {
+    /// The preset's defaults.
+    pub fn new(preset: Preset, images: Option<usize>, seed: u64) -> Self {
+        let spec = preset.spec();
+        Generator {
+            spec,
+            preset,
+            images: images.unwrap_or(spec.images),
+            seed,
+            intrinsics: true_intrinsics(),
+            bend_scale: 1.0,
+            print_scale: 1.0,
+            min_visible: 0.8,
+            noise_px: spec.noise_px,
+        }
+    }
+
+    fn random_pose(&self, rng: &mut ChaCha8Rng, camera: &CameraSpec) -> Pose {
+        let k = &self.intrinsics;
+        let [dmin, dmax] = self.spec.distance_m;
+        let d = rng.gen_range(dmin..dmax);
+        let (w, h) = (camera.width as f64, camera.height as f64);
+        let u = rng.gen_range(0.15 * w..0.85 * w);
+        let v = rng.gen_range(0.15 * h..0.85 * h);
+        let ray = Vector3::new((u - k.cx) / k.fx, (v - k.cy) / k.fy, 1.0).normalize();
+        let centre = ray * d;
+        let deg = std::f64::consts::PI / 180.0;
+        let tilt_x = rng.gen_range(-40.0..40.0) * deg;
+        let tilt_y = rng.gen_range(-40.0..40.0) * deg;
+        let roll = rng.gen_range(-20.0..20.0) * deg;
+        let r = Rotation3::from_euler_angles(tilt_x, tilt_y, roll);
+        Pose::from_parts(&r, &centre)
+    }
+
+    fn random_bend(&self, rng: &mut ChaCha8Rng) -> Paraboloid {
+        let s = &self.spec;
+        let magnitude =
+            (s.bend_mean_m + s.bend_std_m * rng.sample::<f64, _>(rand_distr::StandardNormal)).abs()
+                * self.bend_scale;
+        let n = Normal::new(0.0, 1.0).expect("unit normal");
+        let shape = Paraboloid {
+            a: n.sample(rng),
+            b: n.sample(rng),
+            c: 0.5 * n.sample(rng),
+        };
+        let unit = shape.max_out_of_plane(&s.target);
+        if unit < 1e-12 || magnitude == 0.0 {
+            return Paraboloid::default();
+        }
+        let f = magnitude / unit;
+        Paraboloid {
+            a: shape.a * f,
+            b: shape.b * f,
+            c: shape.c * f,
+        }
+    }
+
+    /// Generates the dataset and its truth.
+    pub fn generate(&self) -> (Dataset, Truth) {
+        let mut rng = ChaCha8Rng::seed_from_u64(self.seed);
+        let s = &self.spec;
+        let target = s.target;
+        let cameras = self.preset.cameras();
+        let print = self.print_scale;
+        let nxy = Normal::new(0.0, s.print_sigma_xy_m).expect("sigma is non-negative");
+        let nz = Normal::new(0.0, s.print_sigma_z_m).expect("sigma is non-negative");
+        let corrections: Vec<[f64; 3]> = (0..target.num_corners())
+            .map(|i| {
+                let right_sheet = i % target.cols >= target.cols / 2;
+                let off = if right_sheet {
+                    s.sheet_offset_m
+                } else {
+                    [0.0, 0.0]
+                };
+                [
+                    print * (nxy.sample(&mut rng) + off[0]),
+                    print * (nxy.sample(&mut rng) + off[1]),
+                    print * nz.sample(&mut rng),
+                ]
+            })
+            .collect();
+        let noise = Normal::new(0.0, self.noise_px).expect("noise is a non-negative number");
+        let mut truth = Truth {
+            preset: self.preset.name().into(),
+            seed: self.seed,
+            noise_px: self.noise_px,
+            target,
+            intrinsics: vec![self.intrinsics; cameras.len()],
+            camera_poses: vec![Pose::identity(); cameras.len()],
+            frame_poses: Vec::with_capacity(self.images),
+            deformations: Vec::with_capacity(self.images),
+            corrections,
+        };
+        let mut rows = Vec::new();
+        let cam = &cameras[0];
+        let (w, h) = (cam.width as f64, cam.height as f64);
+        while truth.frame_poses.len() < self.images {
+            let pose = self.random_pose(&mut rng, cam);
+            let bend = self.random_bend(&mut rng);
+            truth.deformations.push(bend);
+            truth.frame_poses.push(pose);
+            let j = truth.frame_poses.len() - 1;
+            let mut view = Vec::new();
+            for i in 0..target.num_corners() {
+                let xc = pose.transform(&truth.board_point(i, j));
+                let Some(uv) = self.intrinsics.project(&xc) else {
+                    continue;
+                };
+                if uv.x >= 0.0 && uv.x <= w - 1.0 && uv.y >= 0.0 && uv.y <= h - 1.0 {
+                    view.push((i, uv));
+                }
+            }
+            if (view.len() as f64) < self.min_visible * target.num_corners() as f64 {
+                truth.frame_poses.pop();
+                truth.deformations.pop();
+                continue;
+            }
+            for (i, uv) in view {
+                let noisy = uv + Vector2::new(noise.sample(&mut rng), noise.sample(&mut rng));
+                rows.push((0usize, j as i64, i, [noisy.x, noisy.y]));
+            }
+        }
+        (Dataset::from_keyed(target, cameras, rows), truth)
+    }
+}
+
+/// Shorthand: the preset's dataset and truth.
+pub fn generate(preset: Preset, images: Option<usize>, seed: u64) -> (Dataset, Truth) {
+    Generator::new(preset, images, seed).generate()
+}
+
+/// Writes `observations.csv` and `truth.json` into `dir`.
+pub fn write_preset(dir: &Path, dataset: &Dataset, truth: &Truth) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| crate::error::Error::io(dir, e))?;
+    dataset.write_csv(&dir.join("observations.csv"))?;
+    let json = serde_json::to_string_pretty(truth).expect("truth serialises");
+    write_atomic(&dir.join("truth.json"), json.as_bytes())
+}
