@@ -5,6 +5,7 @@
 #include <glog/logging.h>
 
 #include <chrono>
+#include <cstdio>
 #include <cmath>
 #include <memory>
 #include <mutex>
@@ -362,6 +363,18 @@ void ChooseLinearSolver(const Assembled& a, ceres::Solver::Options& s) {
   s.linear_solver_type = reduced <= 1200 ? ceres::DENSE_SCHUR : ceres::SPARSE_SCHUR;
 }
 
+// Per-iteration progress on stderr: stdout belongs to the CLI, and glog's INFO
+// stream is off.
+class StderrProgress : public ceres::IterationCallback {
+ public:
+  ceres::CallbackReturnType operator()(const ceres::IterationSummary& s) override {
+    std::fprintf(stderr, "  iter %3d  cost %.6e  |step| %.3e  tr-radius %.2e  linear-iters %d  %.1f ms\n",
+                 s.iteration, s.cost, s.step_norm, s.trust_region_radius, s.linear_solver_iterations,
+                 1e3 * s.cumulative_time_in_seconds);
+    return ceres::SOLVER_CONTINUE;
+  }
+};
+
 ceres::Solver::Options MakeSolverOptions(const ffi::SolveOptions& o) {
   ceres::Solver::Options s;
   s.max_num_iterations = o.max_iterations;
@@ -370,7 +383,7 @@ ceres::Solver::Options MakeSolverOptions(const ffi::SolveOptions& o) {
   s.parameter_tolerance = o.parameter_tolerance;
   s.num_threads = o.num_threads;
   s.minimizer_progress_to_stdout = false;  // stdout belongs to the CLI
-  s.logging_type = o.verbose ? ceres::PER_MINIMIZER_ITERATION : ceres::SILENT;
+  s.logging_type = ceres::SILENT;
   return s;
 }
 
@@ -386,7 +399,8 @@ SolveReport solve(ProblemData& data, const SolveOptions& options) {
   ChooseLinearSolver(a, s);
   std::string why;
   if (!s.IsValid(&why)) Fail("invalid solver options: " + why);
-  if (options.verbose) FLAGS_minloglevel = google::GLOG_INFO;
+  StderrProgress progress;
+  if (options.verbose) s.callbacks.push_back(&progress);
   ceres::Solver::Summary summary;
   ceres::Solve(s, a.problem.get(), &summary);
 
@@ -406,6 +420,7 @@ SolveReport solve(ProblemData& data, const SolveOptions& options) {
   if (report.usable) params.CopyTo(data);
   report.seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if (options.verbose) std::fprintf(stderr, "%s\n", summary.BriefReport().c_str());
   return report;
 }
 

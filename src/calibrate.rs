@@ -15,6 +15,9 @@ pub const MIN_CORNERS_PER_IMAGE: usize = 4;
 /// Fewest images a calibration accepts.
 pub const MIN_IMAGES: usize = 3;
 
+/// Relative tolerance of the `standard` warm start before a deformation method.
+const WARM_START_TOLERANCE: f64 = 1e-6;
+
 /// What the user asks of one calibration.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Request {
@@ -184,7 +187,23 @@ pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {
         frozen: Vec::new(),
         hold: Hold::default(),
     };
-    let report = standard.solve(&mut state, &request.settings)?;
+    // A warm start only needs to be close: the final stage polishes it.
+    let warm = if request.method == Method::Standard {
+        request.settings.clone()
+    } else {
+        SolverSettings {
+            function_tolerance: request
+                .settings
+                .function_tolerance
+                .max(WARM_START_TOLERANCE),
+            parameter_tolerance: request
+                .settings
+                .parameter_tolerance
+                .max(WARM_START_TOLERANCE),
+            ..request.settings.clone()
+        }
+    };
+    let report = standard.solve(&mut state, &warm)?;
     stages.push(Stage::new(Method::Standard, &report));
 
     let (gauge, frozen) = if request.method == Method::Standard {

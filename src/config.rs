@@ -58,9 +58,9 @@ impl Default for CalibrationConfig {
             loss_scale_px: 1.0,
             threads: 1,
             max_iterations: 100,
-            function_tolerance: 1e-10,
-            gradient_tolerance: 1e-12,
-            parameter_tolerance: 1e-10,
+            function_tolerance: 1e-8,
+            gradient_tolerance: 1e-10,
+            parameter_tolerance: 1e-8,
             gauge_corners: None,
             verbose: false,
         }

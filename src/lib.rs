@@ -8,6 +8,7 @@ pub mod config;
 pub mod deformation;
 pub mod error;
 pub mod ffi;
+pub mod metrics;
 pub mod observations;
 pub mod output;
 pub mod problem;

@@ -1,0 +1,146 @@
+//! Calibration quality metrics (SPEC §3): mapping error, with and without a virtual rotation.
+use crate::camera::Intrinsics;
+use nalgebra::{Matrix3, Rotation3, Vector2, Vector3};
+
+/// Grid step of the mapping error in pixels.
+pub const MAPPING_GRID_STEP_PX: u32 = 20;
+
+/// The rays of a regular pixel grid under `a`, with their pixels.
+fn grid_rays(a: &Intrinsics, width: u32, height: u32) -> Vec<(Vector2<f64>, Vector3<f64>)> {
+    let mut out = Vec::new();
+    for v in (0..height).step_by(MAPPING_GRID_STEP_PX as usize) {
+        for u in (0..width).step_by(MAPPING_GRID_STEP_PX as usize) {
+            let px = Vector2::new(u as f64, v as f64);
+            if let Some(n) = a.unproject(&px) {
+                out.push((px, Vector3::new(n.x, n.y, 1.0)));
+            }
+        }
+    }
+    out
+}
+
+fn rms_after(rays: &[(Vector2<f64>, Vector3<f64>)], b: &Intrinsics, r: &Matrix3<f64>) -> f64 {
+    let mut sum = 0.0;
+    for (px, ray) in rays {
+        match b.project(&(r * ray)) {
+            Some(q) => sum += (q - px).norm_squared(),
+            None => return f64::INFINITY,
+        }
+    }
+    (sum / rays.len() as f64).sqrt()
+}
+
+/// `mapping_error_px`: unproject a 20 px grid with `a`, project with `b`, RMSE in pixels.
+pub fn mapping_error(a: &Intrinsics, b: &Intrinsics, width: u32, height: u32) -> f64 {
+    let rays = grid_rays(a, width, height);
+    if rays.is_empty() {
+        return f64::NAN;
+    }
+    rms_after(&rays, b, &Matrix3::identity())
+}
+
+/// `mapping_error_rot_px`: the mapping error after the best virtual camera rotation
+/// (Gauss-Newton over 3 rotation parameters).
+pub fn mapping_error_rot(a: &Intrinsics, b: &Intrinsics, width: u32, height: u32) -> f64 {
+    let rays = grid_rays(a, width, height);
+    if rays.is_empty() {
+        return f64::NAN;
+    }
+    let mut rot = Rotation3::identity();
+    let mut best = rms_after(&rays, b, rot.matrix());
+    for _ in 0..20 {
+        // Normal equations of the residual q(R·δR·ray) − px in the increment δ.
+        let mut jtj = Matrix3::<f64>::zeros();
+        let mut jtr = Vector3::<f64>::zeros();
+        let h = 1e-7;
+        for (px, ray) in &rays {
+            let base = rot * ray;
+            let Some(q0) = b.project(&base) else {
+                return best;
+            };
+            let r0 = q0 - px;
+            let mut jac = nalgebra::Matrix2x3::<f64>::zeros();
+            for k in 0..3 {
+                let mut d = Vector3::zeros();
+                d[k] = h;
+                let Some(q) = b.project(&(rot * Rotation3::from_scaled_axis(d) * ray)) else {
+                    return best;
+                };
+                jac.set_column(k, &((q - q0) / h));
+            }
+            jtj += jac.transpose() * jac;
+            jtr += jac.transpose() * r0;
+        }
+        let Some(step) = jtj.try_inverse().map(|m| -(m * jtr)) else {
+            break;
+        };
+        let candidate = rot * Rotation3::from_scaled_axis(step);
+        let e = rms_after(&rays, b, candidate.matrix());
+        if e >= best {
+            break;
+        }
+        let gain = best - e;
+        rot = candidate;
+        best = e;
+        if gain < 1e-12 {
+            break;
+        }
+    }
+    best
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    fn lens() -> Intrinsics {
+        Intrinsics {
+            k1: -0.1,
+            k2: 0.05,
+            ..Intrinsics::pinhole(1000.0, 1000.0, 320.0, 240.0)
+        }
+    }
+
+    #[test]
+    fn zero_for_identical_intrinsics() {
+        assert!(mapping_error(&lens(), &lens(), 640, 480) < 1e-9);
+        assert!(mapping_error_rot(&lens(), &lens(), 640, 480) < 1e-9);
+    }
+
+    #[test]
+    fn pure_focal_change_matches_hand_computation() {
+        // Without distortion, scaling f by s moves pixel p to c + s (p − c): the error
+        // is (s − 1)·RMS‖p − c‖ over the grid.
+        let a = Intrinsics::pinhole(1000.0, 1000.0, 320.0, 240.0);
+        let b = Intrinsics::pinhole(1010.0, 1010.0, 320.0, 240.0);
+        let mut sum = 0.0;
+        let mut n = 0.0;
+        for v in (0..480).step_by(20) {
+            for u in (0..640).step_by(20) {
+                sum += (u as f64 - 320.0).powi(2) + (v as f64 - 240.0).powi(2);
+                n += 1.0;
+            }
+        }
+        let expected = 0.01 * (sum / n).sqrt();
+        assert_relative_eq!(
+            mapping_error(&a, &b, 640, 480),
+            expected,
+            max_relative = 1e-9
+        );
+    }
+
+    #[test]
+    fn rotation_removes_a_principal_point_shift() {
+        // A small principal-point shift is nearly a rotation; the rotated error is far smaller.
+        let a = lens();
+        let b = Intrinsics {
+            cx: a.cx + 2.0,
+            ..a
+        };
+        let plain = mapping_error(&a, &b, 640, 480);
+        let rot = mapping_error_rot(&a, &b, 640, 480);
+        assert!(plain > 1.9, "{plain}");
+        assert!(rot < 0.2 * plain, "{rot} vs {plain}");
+    }
+}

@@ -1,0 +1,75 @@
+//! Shared helpers for the integration tests.
+#![allow(dead_code)]
+use deformcal::config::Loss;
+use deformcal::metrics::mapping_error;
+use deformcal::problem::SolverSettings;
+use deformcal::synthetic::{Generator, Preset, Truth};
+use deformcal::{calibrate, Calibration, Dataset, Method, Request};
+
+/// A synthetic preset with scaled bend and print error.
+pub fn data(preset: Preset, images: usize, seed: u64, bend: f64, print: f64) -> (Dataset, Truth) {
+    let mut g = Generator::new(preset, Some(images), seed);
+    g.bend_scale = bend;
+    g.print_scale = print;
+    g.generate()
+}
+
+/// Calibrates with the default settings and the given loss.
+pub fn run(dataset: &Dataset, method: Method, loss: Loss) -> Calibration {
+    let settings = SolverSettings {
+        loss,
+        ..SolverSettings::default()
+    };
+    calibrate(
+        dataset,
+        &Request {
+            method,
+            settings,
+            gauge: None,
+        },
+    )
+    .unwrap_or_else(|e| panic!("{method} failed: {e}"))
+}
+
+/// Mapping error of a calibration against the truth.
+pub fn truth_error(c: &Calibration, truth: &Truth) -> f64 {
+    let cam = &c.dataset.cameras[0];
+    mapping_error(
+        &truth.intrinsics[0],
+        &c.state.intrinsics[0],
+        cam.width,
+        cam.height,
+    )
+}
+
+/// RMS distance between `est` and `truth` after the best similarity transform
+/// (Umeyama) of `est` onto `truth`.
+pub fn aligned_rms(est: &[nalgebra::Vector3<f64>], truth: &[nalgebra::Vector3<f64>]) -> f64 {
+    use nalgebra::{Matrix3, Vector3};
+    let n = est.len() as f64;
+    let me = est.iter().fold(Vector3::zeros(), |a, p| a + p) / n;
+    let mt = truth.iter().fold(Vector3::zeros(), |a, p| a + p) / n;
+    let mut cov = Matrix3::zeros();
+    let mut var = 0.0;
+    for (e, t) in est.iter().zip(truth) {
+        cov += (t - mt) * (e - me).transpose();
+        var += (e - me).norm_squared();
+    }
+    cov /= n;
+    var /= n;
+    let svd = cov.svd(true, true);
+    let (u, vt) = (svd.u.unwrap(), svd.v_t.unwrap());
+    let mut s = Matrix3::identity();
+    if (u * vt).determinant() < 0.0 {
+        s[(2, 2)] = -1.0;
+    }
+    let r = u * s * vt;
+    let scale = (svd.singular_values.component_mul(&s.diagonal())).sum() / var;
+    let t = mt - scale * r * me;
+    (est.iter()
+        .zip(truth)
+        .map(|(e, tr)| (scale * r * e + t - tr).norm_squared())
+        .sum::<f64>()
+        / n)
+        .sqrt()
+}

@@ -1,0 +1,266 @@
+//! The calibration engine against synthetic ground truth.
+mod common;
+use common::*;
+use deformcal::config::Loss;
+use deformcal::metrics::mapping_error_rot;
+use deformcal::problem::{Hold, Problem, SolverSettings};
+use deformcal::synthetic::Preset;
+use deformcal::{Calibration, Method};
+use nalgebra::{DMatrix, Vector3};
+
+/// Noise-only RMSE of a correct model: sqrt(2)·σ per point.
+fn noise_rmse(sigma: f64) -> f64 {
+    std::f64::consts::SQRT_2 * sigma
+}
+
+fn rot_error(c: &Calibration, t: &deformcal::synthetic::Truth) -> f64 {
+    let cam = &c.dataset.cameras[0];
+    mapping_error_rot(
+        &t.intrinsics[0],
+        &c.state.intrinsics[0],
+        cam.width,
+        cam.height,
+    )
+}
+
+#[test]
+fn zhang_initialisation_is_close_and_refinement_converges() {
+    let (d, t) = data(Preset::T2, 25, 11, 0.0, 0.0);
+    let c = run(&d, Method::Standard, Loss::Cauchy);
+    let init = c.initial_intrinsics[0];
+    let truth = t.intrinsics[0];
+    assert!(!c.init_fallback);
+    assert!(
+        (init.fx / truth.fx - 1.0).abs() < 0.03,
+        "init fx {}",
+        init.fx
+    );
+    assert!(
+        (init.fy / truth.fy - 1.0).abs() < 0.03,
+        "init fy {}",
+        init.fy
+    );
+    assert!(
+        (init.cx - truth.cx).abs() < 0.03 * truth.fx,
+        "init cx {}",
+        init.cx
+    );
+    assert!(c.converged);
+    let k = c.state.intrinsics[0];
+    assert!((k.fx - truth.fx).abs() < 3.0, "fx {}", k.fx);
+    assert!((k.fy - truth.fy).abs() < 3.0, "fy {}", k.fy);
+    assert!(
+        (c.rmse_px / noise_rmse(t.noise_px) - 1.0).abs() < 0.1,
+        "rmse {}",
+        c.rmse_px
+    );
+}
+
+#[test]
+fn rigid_board_all_methods_recover_truth() {
+    let (d, t) = data(Preset::T2, 40, 5, 0.0, 0.0);
+    let standard = run(&d, Method::Standard, Loss::Cauchy);
+    let base = rot_error(&standard, &t);
+    for m in Method::ALL {
+        let c = run(&d, m, Loss::Cauchy);
+        let k = c.state.intrinsics[0];
+        let e = rot_error(&c, &t);
+        assert!(c.converged, "{m}");
+        assert!((k.fx - t.intrinsics[0].fx).abs() < 3.0, "{m}: fx {}", k.fx);
+        assert!((k.fy - t.intrinsics[0].fy).abs() < 3.0, "{m}: fy {}", k.fy);
+        assert!(e < 0.4, "{m}: mapping error to truth {e}");
+        // More parameters may cost a little precision, never accuracy beyond the noise.
+        assert!(e < base + 0.25, "{m}: {e} vs standard {base}");
+        assert!(
+            c.rmse_px <= standard.rmse_px + 1e-9,
+            "{m}: train error rose"
+        );
+        // Far, small views cannot pin a bend precisely; typical images must see none.
+        let mut bends: Vec<f64> = c
+            .state
+            .deformations
+            .iter()
+            .map(|b| b.max_out_of_plane(&d.target))
+            .collect();
+        bends.sort_by(f64::total_cmp);
+        assert!(
+            bends[bends.len() / 2] < 0.3e-3,
+            "{m}: median bend {} on a rigid board",
+            bends[bends.len() / 2]
+        );
+    }
+}
+
+#[test]
+fn paraboloid_bends_are_recovered_and_bias_standard() {
+    let (rigid, _) = data(Preset::T2, 60, 3, 0.0, 0.0);
+    let (bent, t) = data(Preset::T2, 60, 3, 1.0, 0.0);
+    let reference = rot_error(&run(&rigid, Method::Standard, Loss::Cauchy), &t);
+    let standard = run(&bent, Method::Standard, Loss::Cauchy);
+    let biased = rot_error(&standard, &t);
+    assert!(
+        standard.rmse_px > 1.5 * noise_rmse(t.noise_px),
+        "{}",
+        standard.rmse_px
+    );
+    for m in [Method::Dynamic, Method::Full] {
+        let c = run(&bent, m, Loss::Cauchy);
+        let e = rot_error(&c, &t);
+        assert!(
+            e < reference + 0.2,
+            "{m}: {e} vs rigid standard {reference}"
+        );
+        assert!(
+            biased > 4.0 * e,
+            "{m}: standard {biased} not clearly worse than {e}"
+        );
+        assert!(
+            (c.rmse_px / noise_rmse(t.noise_px) - 1.0).abs() < 0.1,
+            "{m}: rmse {}",
+            c.rmse_px
+        );
+        // Per-image bend: RMS of Δz over the board, estimated vs true.
+        let target = c.dataset.target;
+        let mut errs: Vec<f64> = c
+            .state
+            .deformations
+            .iter()
+            .zip(&t.deformations)
+            .map(|(est, tr)| {
+                let sq: f64 = target
+                    .nominal_points()
+                    .iter()
+                    .map(|p| (est.dz(p.x, p.y) - tr.dz(p.x, p.y)).powi(2))
+                    .sum();
+                (sq / target.num_corners() as f64).sqrt()
+            })
+            .collect();
+        errs.sort_by(f64::total_cmp);
+        let true_mean = t
+            .deformations
+            .iter()
+            .map(|b| b.max_out_of_plane(&target))
+            .sum::<f64>()
+            / 60.0;
+        assert!(true_mean > 1e-3, "preset bends too little: {true_mean}");
+        assert!(errs[30] < 0.15e-3, "{m}: median bend error {} m", errs[30]);
+        assert!(
+            errs[53] < 0.3e-3,
+            "{m}: 90th percentile bend error {} m",
+            errs[53]
+        );
+    }
+}
+
+fn board(c: &Calibration, xy_only: bool) -> Vec<Vector3<f64>> {
+    let t = c.dataset.target;
+    (0..t.num_corners())
+        .map(|i| {
+            let p = t.nominal(i) + Vector3::from(c.state.corrections[i]);
+            if xy_only {
+                Vector3::new(p.x, p.y, 0.0)
+            } else {
+                p
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn static_print_error_is_recovered_up_to_the_gauge() {
+    let (d, t) = data(Preset::T2, 60, 3, 0.0, 5.0);
+    let n = d.target.num_corners();
+    let truth: Vec<Vector3<f64>> = (0..n).map(|i| t.board_point(i, 0)).collect();
+    let truth_xy: Vec<Vector3<f64>> = truth.iter().map(|p| Vector3::new(p.x, p.y, 0.0)).collect();
+    let nominal = d.target.nominal_points();
+    let error_3d = aligned_rms(&nominal, &truth);
+    let error_xy = aligned_rms(&nominal, &truth_xy);
+    assert!(
+        error_3d > 0.4e-3 && error_xy > 0.25e-3,
+        "print error too small to test"
+    );
+
+    let st = run(&d, Method::Static, Loss::Cauchy);
+    assert!(aligned_rms(&board(&st, false), &truth) < 0.15 * error_3d);
+    let full = run(&d, Method::Full, Loss::Cauchy);
+    assert!(aligned_rms(&board(&full, true), &truth_xy) < 0.2 * error_xy);
+    // Modelling the print error brings the residual back to the noise.
+    assert!(
+        (st.rmse_px / noise_rmse(t.noise_px) - 1.0).abs() < 0.1,
+        "{}",
+        st.rmse_px
+    );
+}
+
+/// Eigenvalues of the column-normalised JᵀJ, ascending.
+fn normalised_spectrum(problem: &Problem, c: &Calibration, settings: &SolverSettings) -> Vec<f64> {
+    let ev = problem.evaluate(&c.state, settings, true).unwrap();
+    let mut j = DMatrix::<f64>::zeros(ev.jacobian_rows, ev.jacobian_cols);
+    for r in 0..ev.jacobian_rows {
+        for k in ev.jacobian_row_ptr[r]..ev.jacobian_row_ptr[r + 1] {
+            j[(r, ev.jacobian_col_idx[k as usize] as usize)] = ev.jacobian_values[k as usize];
+        }
+    }
+    for mut col in j.column_iter_mut() {
+        let norm = col.norm();
+        assert!(norm > 0.0, "a free parameter has no effect on any residual");
+        col /= norm;
+    }
+    let mut e: Vec<f64> = (j.transpose() * &j)
+        .symmetric_eigenvalues()
+        .iter()
+        .copied()
+        .collect();
+    e.sort_by(f64::total_cmp);
+    e
+}
+
+#[test]
+fn gauge_is_fixed_and_removes_exactly_the_free_directions() {
+    let (d, _) = data(Preset::T4, 12, 21, 1.0, 3.0);
+    for (m, dof) in [(Method::Static, 7), (Method::Full, 4)] {
+        let c = run(&d, m, Loss::Cauchy);
+        for (k, &g) in c.gauge.iter().enumerate() {
+            let corr = c.state.corrections[g];
+            let fixed = if m == Method::Static && k == 2 {
+                &corr[2..]
+            } else {
+                &corr[..m.correction_dims()]
+            };
+            assert!(
+                fixed.iter().all(|&v| v == 0.0),
+                "{m}: gauge corner {g} moved: {corr:?}"
+            );
+        }
+        let problem = Problem {
+            dataset: &c.dataset,
+            method: m,
+            gauge: c.gauge.clone(),
+            frozen: c.frozen.clone(),
+            hold: Hold::default(),
+        };
+        let fixed = normalised_spectrum(&problem, &c, &SolverSettings::default());
+        let free = normalised_spectrum(
+            &problem,
+            &c,
+            &SolverSettings {
+                fix_gauge: false,
+                ..SolverSettings::default()
+            },
+        );
+        let max = *fixed.last().unwrap();
+        // Weak directions sit near 1e-9 of the largest eigenvalue, true null ones near
+        // 1e-16: 1e-13 separates them by three orders of magnitude either way.
+        assert!(
+            fixed[0] > 1e-13 * max,
+            "{m}: rank deficient with the gauge: {:e}",
+            fixed[0] / max
+        );
+        let null = free.iter().filter(|&&e| e < 1e-13 * max).count();
+        assert_eq!(
+            null, dof,
+            "{m}: without the gauge the null space should be {dof}-dimensional"
+        );
+        assert_eq!(free.len() - fixed.len(), dof);
+    }
+}
