@@ -60,7 +60,7 @@ impl Default for CalibrationConfig {
             max_iterations: 100,
             function_tolerance: 1e-8,
             gradient_tolerance: 1e-10,
-            parameter_tolerance: 1e-8,
+            parameter_tolerance: 1e-6,
             gauge_corners: None,
             verbose: false,
         }
