@@ -212,9 +212,9 @@ void Validate(const ffi::ProblemData& d, const ffi::SolveOptions& o) {
 
 void SilenceGlogOnce() {
   static std::once_flag once;
-  // Without InitGoogleLogging glog writes to stderr; errors and worse only,
-  // so Ceres' chatter never reaches a CLI user.
-  std::call_once(once, [] { FLAGS_minloglevel = google::GLOG_ERROR; });
+  // Without InitGoogleLogging glog writes to stderr.  Ceres' own failure
+  // messages come back in the solver summary, so nothing below FATAL is shown.
+  std::call_once(once, [] { FLAGS_minloglevel = google::GLOG_FATAL; });
 }
 
 // The assembled problem with the bookkeeping the solver and evaluator need.
