@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cstdio>
 #include <cmath>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <sstream>
@@ -100,18 +101,99 @@ class ReprojectionError {
   double x_[3];
 };
 
-// Working copies of the parameter tables; Ceres holds pointers into them.
+// Residuals of the corners of one view when only the board pose is free (a
+// test-error refit): board points, intrinsics and rig pose are constants, the
+// rotation is applied once per view, and the Jets carry 6 derivatives.  Without
+// a robust loss one block holds a whole view; with one, a single corner.
+class ViewPoseError {
+ public:
+  ViewPoseError(const double* intrinsics, const double* rig) : has_rig_(rig != nullptr) {
+    std::copy(intrinsics, intrinsics + kIntrinsicsSize, intrinsics_);
+    if (rig) std::copy(rig, rig + kPoseSize, rig_);
+  }
+
+  void Add(double u, double v, const double* board_point) {
+    uv_.push_back(u);
+    uv_.push_back(v);
+    points_.insert(points_.end(), board_point, board_point + 3);
+  }
+  int NumResiduals() const { return static_cast<int>(uv_.size()); }
+
+  template <typename T>
+  bool operator()(const T* const pose, T* r) const {
+    T rotation[9];
+    ceres::AngleAxisToRotationMatrix(pose, ceres::RowMajorAdapter3x3(rotation));
+    T intrinsics[kIntrinsicsSize];
+    for (int i = 0; i < kIntrinsicsSize; ++i) intrinsics[i] = T(intrinsics_[i]);
+    for (size_t k = 0; k < uv_.size() / 2; ++k) {
+      const double* x = &points_[3 * k];
+      T xc[3];
+      for (int i = 0; i < 3; ++i) {
+        xc[i] = rotation[3 * i] * x[0] + rotation[3 * i + 1] * x[1] + rotation[3 * i + 2] * x[2] +
+                pose[3 + i];
+      }
+      if (has_rig_) {
+        T rig[kPoseSize], xk[3];
+        for (int i = 0; i < kPoseSize; ++i) rig[i] = T(rig_[i]);
+        TransformPoint(rig, xc, xk);
+        std::copy(xk, xk + 3, xc);
+      }
+      T uv[2];
+      ProjectRadial3(intrinsics, xc, uv);
+      r[2 * k] = T(uv_[2 * k]) - uv[0];
+      r[2 * k + 1] = T(uv_[2 * k + 1]) - uv[1];
+    }
+    return true;
+  }
+
+  static ceres::CostFunction* Create(ViewPoseError* f) {
+    const int n = f->NumResiduals();
+    return new ceres::AutoDiffCostFunction<ViewPoseError, ceres::DYNAMIC, kPoseSize>(f, n);
+  }
+
+ private:
+  bool has_rig_;
+  double intrinsics_[kIntrinsicsSize];
+  double rig_[kPoseSize] = {};
+  std::vector<double> uv_, points_;
+};
+
+// A view of one parameter table inside Params' storage.
+struct Table {
+  double* ptr = nullptr;
+  size_t n = 0;
+  double& operator[](size_t i) { return ptr[i]; }
+  double* data() { return ptr; }
+  double* begin() { return ptr; }
+  double* end() { return ptr + n; }
+};
+
+// Working copies of the parameter tables, in one allocation.  Ceres orders the
+// blocks of an elimination group by address; one buffer in a fixed table order
+// makes that order, and so the floating-point result, the same in every run.
 struct Params {
-  std::vector<double> intrinsics, camera_poses, frame_poses, deformations, corrections;
+  std::vector<double> storage;
+  Table intrinsics, camera_poses, frame_poses, deformations, corrections;
 
-  explicit Params(const ffi::ProblemData& d)
-      : intrinsics(d.intrinsics.begin(), d.intrinsics.end()),
-        camera_poses(d.camera_poses.begin(), d.camera_poses.end()),
-        frame_poses(d.frame_poses.begin(), d.frame_poses.end()),
-        deformations(d.deformations.begin(), d.deformations.end()),
-        corrections(d.corrections.begin(), d.corrections.end()) {}
+  explicit Params(const ffi::ProblemData& d) {
+    const rust::Vec<double>* sources[] = {&d.intrinsics, &d.camera_poses, &d.frame_poses,
+                                          &d.deformations, &d.corrections};
+    Table* tables[] = {&intrinsics, &camera_poses, &frame_poses, &deformations, &corrections};
+    size_t total = 0;
+    for (const auto* src : sources) total += src->size();
+    storage.reserve(total);
+    for (const auto* src : sources) storage.insert(storage.end(), src->begin(), src->end());
+    size_t offset = 0;
+    for (int k = 0; k < 5; ++k) {
+      tables[k]->ptr = storage.data() + offset;
+      tables[k]->n = sources[k]->size();
+      offset += tables[k]->n;
+    }
+  }
+  Params(const Params&) = delete;
+  Params& operator=(const Params&) = delete;
 
-  void CopyTo(ffi::ProblemData& d) const {
+  void CopyTo(ffi::ProblemData& d) {
     std::copy(intrinsics.begin(), intrinsics.end(), d.intrinsics.begin());
     std::copy(camera_poses.begin(), camera_poses.end(), d.camera_poses.begin());
     std::copy(frame_poses.begin(), frame_poses.end(), d.frame_poses.begin());
@@ -221,6 +303,8 @@ void SilenceGlogOnce() {
 struct Assembled {
   std::unique_ptr<ceres::Problem> problem;
   std::vector<ceres::ResidualBlockId> residuals;
+  // The observations behind each residual block, in its residual order.
+  std::vector<std::vector<uint32_t>> block_observations;
   std::vector<double*> frame_pose_blocks;
   std::vector<double*> correction_blocks;  // free (non-constant) corrections
   int correction_dim = 0;
@@ -232,10 +316,19 @@ void AddResiduals(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params&
   ceres::LossFunction* loss =
       o.loss == ffi::LossKind::Cauchy ? new ceres::CauchyLoss(o.loss_scale_px) : nullptr;
   const size_t n = d.obs_uv.size() / 2;
+  bool corner_blocks_fixed = d.fix_corrections, frame_blocks_fixed = d.fix_deformations;
+  for (int b = 0; b < Board::kNumBlocks; ++b) {
+    if (Board::kOwners[b] == BlockOwner::kCorner && !d.fix_corrections) corner_blocks_fixed = false;
+    if (Board::kOwners[b] == BlockOwner::kFrame && !d.fix_deformations) frame_blocks_fixed = false;
+  }
+  const bool pose_only = d.fix_intrinsics && (d.num_cameras == 1 || d.fix_camera_poses) &&
+                         corner_blocks_fixed && frame_blocks_fixed;
   std::vector<double*> blocks;
   std::vector<bool> corner_used(d.num_corners, false);
   std::vector<bool> frame_used(d.num_frames, false);
   a.residuals.reserve(n);
+  // Pose-only views being collected: (camera, frame) -> functor and its observations.
+  std::map<std::pair<uint32_t, uint32_t>, std::pair<ViewPoseError*, std::vector<uint32_t>>> views;
   for (size_t i = 0; i < n; ++i) {
     const uint32_t cam = d.obs_camera[i], frame = d.obs_frame[i], corner = d.obs_corner[i];
     blocks.clear();
@@ -248,12 +341,36 @@ void AddResiduals(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params&
                            : &p.deformations[kParaboloidSize * frame]);
     }
     const double* x = &d.board[3 * corner];
-    ceres::CostFunction* cost =
-        cam > 0 ? ReprojectionError<Board, true>::Create(d.obs_uv[2 * i], d.obs_uv[2 * i + 1], x)
-                : ReprojectionError<Board, false>::Create(d.obs_uv[2 * i], d.obs_uv[2 * i + 1], x);
-    a.residuals.push_back(a.problem->AddResidualBlock(cost, loss, blocks));
+    const double u = d.obs_uv[2 * i], v = d.obs_uv[2 * i + 1];
+    if (pose_only) {
+      double point[3];
+      Board::Point(x, blocks.data() + (cam > 0 ? 3 : 2), point);
+      const double* rig = cam > 0 ? blocks[1] : nullptr;
+      double* pose = blocks[cam > 0 ? 2 : 1];
+      if (loss == nullptr) {
+        auto& view = views[{cam, frame}];
+        if (view.first == nullptr) view.first = new ViewPoseError(blocks[0], rig);
+        view.first->Add(u, v, point);
+        view.second.push_back(static_cast<uint32_t>(i));
+      } else {
+        auto* f = new ViewPoseError(blocks[0], rig);
+        f->Add(u, v, point);
+        a.residuals.push_back(a.problem->AddResidualBlock(ViewPoseError::Create(f), loss, pose));
+        a.block_observations.push_back({static_cast<uint32_t>(i)});
+      }
+    } else {
+      ceres::CostFunction* cost = cam > 0 ? ReprojectionError<Board, true>::Create(u, v, x)
+                                          : ReprojectionError<Board, false>::Create(u, v, x);
+      a.residuals.push_back(a.problem->AddResidualBlock(cost, loss, blocks));
+      a.block_observations.push_back({static_cast<uint32_t>(i)});
+    }
     corner_used[corner] = true;
     frame_used[frame] = true;
+  }
+  for (auto& [key, view] : views) {
+    double* pose = &p.frame_poses[kPoseSize * key.second];
+    a.residuals.push_back(a.problem->AddResidualBlock(ViewPoseError::Create(view.first), nullptr, pose));
+    a.block_observations.push_back(std::move(view.second));
   }
   ceres::Problem& problem = *a.problem;
   for (uint32_t f = 0; f < d.num_frames; ++f) {
@@ -273,13 +390,15 @@ void AddResiduals(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params&
   }
   if (has_frame_blocks && d.fix_deformations) {
     for (uint32_t f = 0; f < d.num_frames; ++f) {
-      if (frame_used[f]) problem.SetParameterBlockConstant(&p.deformations[kParaboloidSize * f]);
+      double* block = &p.deformations[kParaboloidSize * f];
+      if (problem.HasParameterBlock(block)) problem.SetParameterBlockConstant(block);
     }
   }
   if (has_corner_blocks) {
     if (d.fix_corrections) {
       for (uint32_t c = 0; c < d.num_corners; ++c) {
-        if (corner_used[c]) problem.SetParameterBlockConstant(&p.corrections[kCorrectionStride * c]);
+        double* block = &p.corrections[kCorrectionStride * c];
+        if (problem.HasParameterBlock(block)) problem.SetParameterBlockConstant(block);
       }
     } else {
       for (uint32_t c : d.frozen_corners) {
@@ -444,7 +563,16 @@ Evaluation evaluate(const ProblemData& data, const SolveOptions& options, bool w
   }
   Evaluation out;
   out.cost = cost;
-  for (double r : residuals) out.residuals.push_back(r);
+  // Ceres orders residuals by block; hand them back in observation order.
+  std::vector<double> ordered(data.obs_uv.size(), 0.0);
+  size_t next = 0;
+  for (const auto& obs : a.block_observations) {
+    for (uint32_t i : obs) {
+      ordered[2 * i] = residuals[next++];
+      ordered[2 * i + 1] = residuals[next++];
+    }
+  }
+  for (double r : ordered) out.residuals.push_back(r);
   if (with_jacobian) {
     out.jacobian_rows = static_cast<size_t>(jacobian.num_rows);
     out.jacobian_cols = static_cast<size_t>(jacobian.num_cols);

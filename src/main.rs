@@ -3,6 +3,7 @@ use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand};
 use deformcal::config::Config;
 use deformcal::problem::SolverSettings;
+use deformcal::protocol::{self, Shard};
 use deformcal::synthetic::{Generator, Preset};
 use deformcal::{calibrate, output, report, Method, Request};
 use std::path::PathBuf;
@@ -24,6 +25,57 @@ enum Command {
     Calibrate(CalibrateArgs),
     /// Write a built-in synthetic dataset as observations.csv plus truth.json.
     Generate(GenerateArgs),
+    /// Run the evaluation protocol: every subset × method, with metrics and a report.
+    Protocol(ProtocolArgs),
+    /// Combine the shard files of a sharded protocol run into its outputs.
+    Merge(MergeArgs),
+    /// Run the protocol of several configs and write one combined report.
+    Batch(BatchArgs),
+}
+
+#[derive(Args, Debug)]
+struct ProtocolArgs {
+    /// The TOML config (its [protocol] table, defaults otherwise).
+    #[arg(long, short)]
+    config: PathBuf,
+    /// Run only the i-th of N slices of the subset × method grid (e.g. 0/4).
+    #[arg(long)]
+    shard: Option<String>,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Override [protocol] subsets (e.g. a quick run).
+    #[arg(long)]
+    subsets: Option<usize>,
+    /// Override [output] dir.
+    #[arg(long)]
+    output: Option<PathBuf>,
+}
+
+#[derive(Args, Debug)]
+struct MergeArgs {
+    /// Folder to write the merged outputs into.
+    #[arg(long)]
+    output: PathBuf,
+    /// Shard files written by `protocol --shard`.
+    #[arg(required = true)]
+    shards: Vec<PathBuf>,
+}
+
+#[derive(Args, Debug)]
+struct BatchArgs {
+    /// Protocol configs, one per dataset.
+    #[arg(required = true)]
+    configs: Vec<PathBuf>,
+    /// Folder for the combined report; each dataset goes to a subfolder named after its config.
+    #[arg(long)]
+    output: PathBuf,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Override every config's [protocol] subsets.
+    #[arg(long)]
+    subsets: Option<usize>,
 }
 
 #[derive(Args, Debug)]
@@ -109,11 +161,184 @@ fn run_generate(args: GenerateArgs) -> Result<()> {
     Ok(())
 }
 
+/// Runs (a shard of) one config's protocol with a progress bar; returns header and rows.
+fn protocol_rows(
+    config: &Config,
+    subsets: Option<usize>,
+    shard: Option<Shard>,
+    threads: Option<usize>,
+) -> Result<(protocol::Header, Vec<protocol::Row>)> {
+    let mut p = config.protocol.clone().unwrap_or_default();
+    if let Some(n) = subsets {
+        anyhow::ensure!(n > 0, "--subsets must be at least 1");
+        p.subsets = n;
+    }
+    let threads = threads.unwrap_or_else(|| {
+        std::thread::available_parallelism()
+            .map(|n| n.get())
+            .unwrap_or(1)
+    });
+    anyhow::ensure!((1..=256).contains(&threads), "--threads must be 1 to 256");
+    eprintln!(
+        "{}: reference calibration and subsets…",
+        config.path.display()
+    );
+    let setup =
+        protocol::prepare(config, &p).with_context(|| format!("{}", config.path.display()))?;
+    let tasks = (0..setup.header.tasks())
+        .filter(|&t| shard.is_none_or(|s| s.owns(t)))
+        .count();
+    let bar = indicatif::ProgressBar::new(tasks as u64).with_style(
+        indicatif::ProgressStyle::with_template(
+            "{prefix} [{bar:40}] {pos}/{len} calibrations, {elapsed} elapsed, ETA {eta}",
+        )
+        .expect("valid template")
+        .progress_chars("=> "),
+    );
+    bar.set_prefix(setup.header.dataset.clone());
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()?;
+    let rows = pool.install(|| setup.run(shard, &|| bar.inc(1)));
+    bar.finish_and_clear();
+    Ok((setup.header, rows))
+}
+
+fn print_summary(summary: &deformcal::protocol_report::Summary) {
+    println!("{}", summary.header.dataset);
+    println!(
+        "  {:9} {:>16} {:>16} {:>16} {:>10}",
+        "method", "train RMSE", "test RMSE", "map. error (px)", "failed"
+    );
+    for m in &summary.header.methods {
+        let s = &summary.methods[m.name()];
+        let f = |k: &str| {
+            s.metrics
+                .get(k)
+                .map(|x| format!("{:.3} ± {:.3}", x.mean, x.std))
+                .unwrap_or_else(|| "–".into())
+        };
+        let mapping = if summary.header.truth.is_some() {
+            "truth_mapping_error_px"
+        } else {
+            "mapping_error_px"
+        };
+        println!(
+            "  {:9} {:>16} {:>16} {:>16} {:>10}",
+            m.name(),
+            f("rmse_px"),
+            f("test_rmse_px"),
+            f(mapping),
+            s.failed
+        );
+    }
+}
+
+fn run_protocol(args: ProtocolArgs) -> Result<()> {
+    let start = std::time::Instant::now();
+    let mut config = Config::load(&args.config)?;
+    if let Some(o) = args.output {
+        config.output_dir = o;
+    }
+    let shard = match &args.shard {
+        Some(s) => Some(
+            Shard::parse(s)
+                .with_context(|| format!("--shard: `{s}` is not i/N with 0 <= i < N"))?,
+        ),
+        None => None,
+    };
+    let (header, rows) = protocol_rows(&config, args.subsets, shard, args.threads)?;
+    match shard {
+        Some(s) => {
+            let file = protocol::ShardFile {
+                header,
+                shard: [s.index, s.count],
+                rows,
+            };
+            std::fs::create_dir_all(&config.output_dir)
+                .map_err(|e| deformcal::Error::io(&config.output_dir, e))?;
+            let path = config
+                .output_dir
+                .join(format!("shard-{}-of-{}.json", s.index, s.count));
+            output::write_atomic(&path, serde_json::to_string(&file)?.as_bytes())?;
+            println!(
+                "wrote {} ({} calibrations) in {:.1} s",
+                path.display(),
+                file.rows.len(),
+                start.elapsed().as_secs_f64()
+            );
+        }
+        None => {
+            let summary =
+                deformcal::protocol_report::write_outputs(&config.output_dir, &header, &rows)?;
+            print_summary(&summary);
+            println!(
+                "wrote {} in {:.1} s",
+                config.output_dir.join("report.md").display(),
+                start.elapsed().as_secs_f64()
+            );
+        }
+    }
+    Ok(())
+}
+
+fn run_merge(args: MergeArgs) -> Result<()> {
+    let mut files = Vec::new();
+    for p in &args.shards {
+        let text = std::fs::read_to_string(p).with_context(|| format!("{}", p.display()))?;
+        let f: protocol::ShardFile = serde_json::from_str(&text)
+            .with_context(|| format!("{}: not a deformcal shard file", p.display()))?;
+        files.push(f);
+    }
+    let (header, rows) = protocol::merge(files)?;
+    let summary = deformcal::protocol_report::write_outputs(&args.output, &header, &rows)?;
+    print_summary(&summary);
+    println!("wrote {}", args.output.join("report.md").display());
+    Ok(())
+}
+
+fn run_batch(args: BatchArgs) -> Result<()> {
+    let start = std::time::Instant::now();
+    let mut report = String::from("# deformcal evaluation protocol: combined report\n\n");
+    let mut names = std::collections::BTreeSet::new();
+    for path in &args.configs {
+        let config = Config::load(path)?;
+        let name = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().to_string())
+            .unwrap_or_default();
+        anyhow::ensure!(
+            names.insert(name.clone()),
+            "{}: two configs share the name `{name}`",
+            path.display()
+        );
+        let (header, rows) = protocol_rows(&config, args.subsets, None, args.threads)?;
+        let dir = args.output.join(&name);
+        let summary = deformcal::protocol_report::write_outputs(&dir, &header, &rows)?;
+        print_summary(&summary);
+        report.push_str(&deformcal::protocol_report::report_markdown(
+            &summary,
+            &rows,
+            &format!("{name}/"),
+        ));
+    }
+    output::write_atomic(&args.output.join("report.md"), report.as_bytes())?;
+    println!(
+        "wrote {} in {:.1} s",
+        args.output.join("report.md").display(),
+        start.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Some(Command::Calibrate(a)) => run_calibrate(a),
         Some(Command::Generate(a)) => run_generate(a),
+        Some(Command::Protocol(a)) => run_protocol(a),
+        Some(Command::Merge(a)) => run_merge(a),
+        Some(Command::Batch(a)) => run_batch(a),
         None => run_calibrate(cli.calibrate),
     };
     match result {

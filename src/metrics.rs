@@ -131,6 +131,28 @@ mod tests {
     }
 
     #[test]
+    fn symmetric_within_a_small_tolerance() {
+        let a = lens();
+        let b = Intrinsics {
+            fx: 1006.0,
+            cx: 323.0,
+            k1: -0.09,
+            ..lens()
+        };
+        let (ab, ba) = (
+            mapping_error(&a, &b, 640, 480),
+            mapping_error(&b, &a, 640, 480),
+        );
+        assert!(ab > 1.0);
+        assert!((ab - ba).abs() < 0.02 * ab, "{ab} vs {ba}");
+        let (ab, ba) = (
+            mapping_error_rot(&a, &b, 640, 480),
+            mapping_error_rot(&b, &a, 640, 480),
+        );
+        assert!((ab - ba).abs() < 0.05 * ab.max(0.01), "{ab} vs {ba}");
+    }
+
+    #[test]
     fn rotation_removes_a_principal_point_shift() {
         // A small principal-point shift is nearly a rotation; the rotated error is far smaller.
         let a = lens();

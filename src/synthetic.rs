@@ -125,6 +125,8 @@ impl Preset {
                 print_sigma_xy_m: 200e-6,
                 print_sigma_z_m: 400e-6,
                 sheet_offset_m: [0.4e-3, -0.3e-3],
+                // Smaller boards are held closer to fill the view.
+                distance_m: [1.5, 4.5],
                 ..base
             },
             Preset::T4 => PresetSpec {
@@ -135,6 +137,7 @@ impl Preset {
                 },
                 bend_mean_m: 0.19e-3,
                 bend_std_m: 0.57e-3,
+                distance_m: [1.5, 3.5],
                 ..base
             },
             Preset::Reference => PresetSpec {

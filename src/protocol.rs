@@ -1,0 +1,400 @@
+//! The evaluation protocol (SPEC §3–4, the paper's section 4): reference calibration,
+//! reproducible subsets, every subset × method calibrated and measured, in parallel,
+//! sharded if asked.
+use crate::calibrate::{calibrate, Calibration, Request};
+use crate::camera::Intrinsics;
+use crate::config::{Config, ProtocolConfig};
+use crate::deformation::{Method, Paraboloid};
+use crate::error::{Error, Result};
+use crate::metrics::{mapping_error, mapping_error_rot};
+use crate::observations::Dataset;
+use crate::problem::{rmse, Hold, Problem, SolverSettings, State};
+use crate::synthetic::Truth;
+use crate::target::Target;
+use rand::{RngCore, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// Draws `subsets` subsets of `k` distinct frames out of `n`, each sorted.
+///
+/// A partial Fisher–Yates shuffle driven by ChaCha8's specified stream, so the
+/// subsets are the same on every machine, thread count and library version.
+pub fn draw_subsets(n: usize, k: usize, subsets: usize, seed: u64) -> Result<Vec<Vec<usize>>> {
+    if k > n {
+        return Err(Error::Degenerate(format!(
+            "images_per_subset is {k} but the dataset has only {n} images"
+        )));
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut out = Vec::with_capacity(subsets);
+    for _ in 0..subsets {
+        let mut idx: Vec<usize> = (0..n).collect();
+        for i in 0..k {
+            let j = i + (rng.next_u64() % (n - i) as u64) as usize;
+            idx.swap(i, j);
+        }
+        let mut s = idx[..k].to_vec();
+        s.sort_unstable();
+        out.push(s);
+    }
+    Ok(out)
+}
+
+/// What a merge needs to know about the run that produced a set of rows.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Header {
+    /// The dataset's name (preset name or CSV file).
+    pub dataset: String,
+    pub subsets: usize,
+    pub images_per_subset: usize,
+    pub seed: u64,
+    pub methods: Vec<Method>,
+    pub target: Target,
+    pub width: u32,
+    pub height: u32,
+    pub dataset_images: usize,
+    pub reference: Option<ReferenceInfo>,
+    pub truth: Option<Intrinsics>,
+}
+
+impl Header {
+    /// Number of subset × method tasks.
+    pub fn tasks(&self) -> usize {
+        self.subsets * self.methods.len()
+    }
+}
+
+/// The reference calibration as the report shows it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ReferenceInfo {
+    pub intrinsics: Intrinsics,
+    pub rmse_px: f64,
+    pub images: usize,
+    pub observations: usize,
+    pub converged: bool,
+}
+
+/// One subset × method result.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Row {
+    pub subset: usize,
+    pub method: Method,
+    /// `None` when the calibration succeeded, else the reason it failed.
+    pub error: Option<String>,
+    pub images: usize,
+    pub observations: usize,
+    pub converged: bool,
+    pub iterations: i32,
+    pub rmse_px: Option<f64>,
+    pub test_rmse_px: Option<f64>,
+    pub mapping_error_px: Option<f64>,
+    pub mapping_error_rot_px: Option<f64>,
+    pub truth_mapping_error_px: Option<f64>,
+    pub truth_mapping_error_rot_px: Option<f64>,
+    pub intrinsics: Option<Intrinsics>,
+    /// User frame ids of the subset's images, in order.
+    pub frames: Vec<i64>,
+    /// The per-image paraboloid (methods that have one).
+    pub deformations: Vec<Paraboloid>,
+    /// `max_out_of_plane_m` per image (methods that have a paraboloid).
+    pub max_out_of_plane_m: Vec<f64>,
+}
+
+impl Row {
+    /// Whether the calibration succeeded.
+    pub fn ok(&self) -> bool {
+        self.error.is_none()
+    }
+}
+
+/// `--shard i/N`: the i-th of N disjoint slices of the task grid.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Shard {
+    pub index: usize,
+    pub count: usize,
+}
+
+impl Shard {
+    /// Parses `i/N` with 0 ≤ i < N.
+    pub fn parse(s: &str) -> Option<Shard> {
+        let (i, n) = s.split_once('/')?;
+        let (index, count) = (i.trim().parse().ok()?, n.trim().parse().ok()?);
+        (count > 0 && index < count).then_some(Shard { index, count })
+    }
+
+    /// Whether task `t` belongs to this shard (round robin, so shards stay balanced).
+    pub fn owns(&self, t: usize) -> bool {
+        t % self.count == self.index
+    }
+}
+
+/// A shard's output file: the header and its rows.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ShardFile {
+    pub header: Header,
+    pub shard: [usize; 2],
+    pub rows: Vec<Row>,
+}
+
+/// Everything prepared before the tasks run.
+pub struct Setup {
+    pub header: Header,
+    pub dataset: Dataset,
+    pub truth: Option<Truth>,
+    pub reference: Option<Calibration>,
+    pub subsets: Vec<Vec<usize>>,
+    pub settings: SolverSettings,
+}
+
+/// Loads the data, runs the reference calibration and draws the subsets.
+pub fn prepare(config: &Config, protocol: &ProtocolConfig) -> Result<Setup> {
+    let (dataset, truth) = crate::load_source(&config.data, config.target, &config.cameras)?;
+    if dataset.cameras.len() != 1 {
+        return Err(Error::Invalid(
+            "the protocol runs on single-camera datasets".into(),
+        ));
+    }
+    // One Ceres thread per solve: parallelism comes from running tasks side by side,
+    // and single-threaded solves sum in a fixed order, so results are reproducible.
+    let settings = SolverSettings {
+        threads: 1,
+        ..SolverSettings::from(&config.calibration)
+    };
+    let reference = match &config.reference {
+        None => None,
+        Some(r) => {
+            let (ref_data, _) = crate::load_source(&r.source, r.target, &config.cameras)?;
+            let request = Request {
+                method: Method::Static,
+                settings: settings.clone(),
+                gauge: None,
+            };
+            let c = calibrate(&ref_data, &request).map_err(|e| match e {
+                Error::Degenerate(m) | Error::Init(m) | Error::Solver(m) => {
+                    Error::Degenerate(format!("the reference calibration failed: {m}"))
+                }
+                other => other,
+            })?;
+            Some(c)
+        }
+    };
+    let subsets = draw_subsets(
+        dataset.num_frames(),
+        protocol.images_per_subset,
+        protocol.subsets,
+        protocol.seed,
+    )?;
+    let cam = &dataset.cameras[0];
+    let header = Header {
+        dataset: dataset_name(config),
+        subsets: protocol.subsets,
+        images_per_subset: protocol.images_per_subset,
+        seed: protocol.seed,
+        methods: protocol.methods.clone(),
+        target: dataset.target,
+        width: cam.width,
+        height: cam.height,
+        dataset_images: dataset.num_frames(),
+        reference: reference.as_ref().map(|c| ReferenceInfo {
+            intrinsics: c.state.intrinsics[0],
+            rmse_px: c.rmse_px,
+            images: c.dataset.num_frames(),
+            observations: c.dataset.observations.len(),
+            converged: c.converged,
+        }),
+        truth: truth.as_ref().map(|t| t.intrinsics[0]),
+    };
+    Ok(Setup {
+        header,
+        dataset,
+        truth,
+        reference,
+        subsets,
+        settings,
+    })
+}
+
+fn dataset_name(config: &Config) -> String {
+    match &config.data {
+        crate::config::DataSource::Synthetic { preset, .. } => preset.name().to_string(),
+        crate::config::DataSource::Observations(p) => p.display().to_string(),
+    }
+}
+
+/// `test_rmse_px`: the reference set refitted with only its poses free, the given
+/// intrinsics and the reference static correction held.  The refit is plain least
+/// squares: the reference set is clean, and the RMSE is a least-squares figure.
+pub fn test_rmse(
+    reference: &Calibration,
+    intrinsics: &Intrinsics,
+    settings: &SolverSettings,
+) -> Result<f64> {
+    let settings = &SolverSettings {
+        loss: crate::config::Loss::None,
+        ..settings.clone()
+    };
+    let mut state = State {
+        intrinsics: vec![*intrinsics],
+        ..reference.state.clone()
+    };
+    let problem = Problem {
+        dataset: &reference.dataset,
+        method: Method::Static,
+        gauge: reference.gauge.clone(),
+        frozen: reference.frozen.clone(),
+        hold: Hold {
+            intrinsics: true,
+            camera_poses: true,
+            corrections: true,
+            deformations: true,
+        },
+    };
+    problem.solve(&mut state, settings)?;
+    Ok(rmse(&problem.evaluate(&state, settings, false)?.residuals))
+}
+
+impl Setup {
+    /// Runs one subset × method task; failures become a row with the reason.
+    pub fn task(&self, t: usize) -> Row {
+        let methods = &self.header.methods;
+        let (subset, method) = (t / methods.len(), methods[t % methods.len()]);
+        let data = self.dataset.subset(&self.subsets[subset]);
+        let mut row = Row {
+            subset,
+            method,
+            error: None,
+            images: data.num_frames(),
+            observations: data.observations.len(),
+            converged: false,
+            iterations: 0,
+            rmse_px: None,
+            test_rmse_px: None,
+            mapping_error_px: None,
+            mapping_error_rot_px: None,
+            truth_mapping_error_px: None,
+            truth_mapping_error_rot_px: None,
+            intrinsics: None,
+            frames: data.frame_ids.clone(),
+            deformations: Vec::new(),
+            max_out_of_plane_m: Vec::new(),
+        };
+        let request = Request {
+            method,
+            settings: self.settings.clone(),
+            gauge: None,
+        };
+        let c = match calibrate(&data, &request) {
+            Ok(c) => c,
+            Err(e) => {
+                row.error = Some(e.to_string());
+                return row;
+            }
+        };
+        let k = c.state.intrinsics[0];
+        let (w, h) = (self.header.width, self.header.height);
+        row.images = c.dataset.num_frames();
+        row.observations = c.dataset.observations.len();
+        row.frames = c.dataset.frame_ids.clone();
+        row.converged = c.converged;
+        row.iterations = c.iterations();
+        row.rmse_px = Some(c.rmse_px);
+        row.intrinsics = Some(k);
+        if let Some(r) = &self.reference {
+            let rk = r.state.intrinsics[0];
+            row.mapping_error_px = finite(mapping_error(&rk, &k, w, h));
+            row.mapping_error_rot_px = finite(mapping_error_rot(&rk, &k, w, h));
+            match test_rmse(r, &k, &self.settings) {
+                Ok(e) => row.test_rmse_px = finite(e),
+                Err(e) => row.error = Some(format!("test error: {e}")),
+            }
+        }
+        if let Some(t) = &self.truth {
+            let tk = t.intrinsics[0];
+            row.truth_mapping_error_px = finite(mapping_error(&tk, &k, w, h));
+            row.truth_mapping_error_rot_px = finite(mapping_error_rot(&tk, &k, w, h));
+        }
+        if method.has_paraboloid() {
+            row.deformations = c.state.deformations.clone();
+            row.max_out_of_plane_m = c
+                .state
+                .deformations
+                .iter()
+                .map(|d| d.max_out_of_plane(&c.dataset.target))
+                .collect();
+        }
+        row
+    }
+
+    /// Runs the tasks of `shard` (all without one) on the current rayon pool,
+    /// calling `tick` after each; rows come back in task order.
+    pub fn run(&self, shard: Option<Shard>, tick: &(dyn Fn() + Sync)) -> Vec<Row> {
+        let tasks: Vec<usize> = (0..self.header.tasks())
+            .filter(|&t| shard.is_none_or(|s| s.owns(t)))
+            .collect();
+        tasks
+            .par_iter()
+            .map(|&t| {
+                let row = self.task(t);
+                tick();
+                row
+            })
+            .collect()
+    }
+}
+
+fn finite(v: f64) -> Option<f64> {
+    v.is_finite().then_some(v)
+}
+
+/// Checks that shard files come from one run and together cover every task once;
+/// returns the header and the rows in task order.
+pub fn merge(files: Vec<ShardFile>) -> Result<(Header, Vec<Row>)> {
+    let first = files
+        .first()
+        .ok_or_else(|| Error::Invalid("no shard files to merge".into()))?;
+    let header = first.header.clone();
+    let mut slots: Vec<Option<Row>> = vec![None; header.tasks()];
+    let m = header.methods.len();
+    for f in files {
+        if f.header != header {
+            return Err(Error::Invalid(format!(
+                "shard {}/{} comes from a different run (config, seed or data differ)",
+                f.shard[0], f.shard[1]
+            )));
+        }
+        for row in f.rows {
+            let Some(mi) = header.methods.iter().position(|&x| x == row.method) else {
+                return Err(Error::Invalid(format!(
+                    "a row has method {} outside the run",
+                    row.method
+                )));
+            };
+            let t = row.subset * m + mi;
+            if t >= slots.len() {
+                return Err(Error::Invalid(format!(
+                    "a row has subset {} outside the run",
+                    row.subset
+                )));
+            }
+            if slots[t].is_some() {
+                return Err(Error::Invalid(format!(
+                    "subset {} × {} appears in two shards",
+                    row.subset, row.method
+                )));
+            }
+            slots[t] = Some(row);
+        }
+    }
+    let missing = slots.iter().filter(|s| s.is_none()).count();
+    if missing > 0 {
+        return Err(Error::Invalid(format!(
+            "{missing} of {} subset × method results are missing: merge every shard of the run",
+            slots.len()
+        )));
+    }
+    Ok((
+        header,
+        slots.into_iter().map(|s| s.expect("checked")).collect(),
+    ))
+}

@@ -1,0 +1,248 @@
+//! The evaluation protocol: reproducibility, sharding, and the paper's findings on
+//! the synthetic presets (quick variants of configs/protocol_*.toml).
+mod common;
+use deformcal::config::{Config, ProtocolConfig};
+use deformcal::problem::{Hold, Problem, SolverSettings};
+use deformcal::protocol::{draw_subsets, merge, prepare, Setup, Shard, ShardFile};
+use deformcal::protocol_report::{protocol_csv, summarise, Summary};
+use deformcal::Method;
+use std::path::Path;
+use std::process::Command;
+
+fn setup(preset: &str, reference_images: usize, subsets: usize, methods: &[Method]) -> Setup {
+    let text = format!(
+        "[data]\nsynthetic = \"{preset}\"\n[reference]\nsynthetic = \"reference\"\nimages = {reference_images}\n"
+    );
+    let config = Config::parse(&text, Path::new("test.toml")).unwrap();
+    let protocol = ProtocolConfig {
+        subsets,
+        images_per_subset: 25,
+        seed: 7,
+        methods: methods.to_vec(),
+    };
+    prepare(&config, &protocol).unwrap()
+}
+
+fn run_on(setup: &Setup, threads: usize, shard: Option<Shard>) -> Vec<deformcal::protocol::Row> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    pool.install(|| setup.run(shard, &|| {}))
+}
+
+fn mean(s: &Summary, m: Method, key: &str) -> f64 {
+    s.methods[m.name()].metrics[key].mean
+}
+
+#[test]
+fn subsets_are_reproducible_distinct_and_in_range() {
+    let a = draw_subsets(500, 25, 50, 7).unwrap();
+    assert_eq!(a, draw_subsets(500, 25, 50, 7).unwrap());
+    assert_ne!(a, draw_subsets(500, 25, 50, 8).unwrap());
+    for s in &a {
+        assert_eq!(s.len(), 25);
+        assert!(s.windows(2).all(|w| w[0] < w[1]), "sorted and distinct");
+        assert!(*s.last().unwrap() < 500);
+    }
+    assert_ne!(a[0], a[1]);
+    assert!(draw_subsets(20, 25, 1, 7).is_err());
+}
+
+#[test]
+fn same_seed_same_results_across_threads_and_shards() {
+    let s = setup("t2", 80, 3, &[Method::Standard, Method::Full]);
+    let one = run_on(&s, 1, None);
+    let two = run_on(&s, 2, None);
+    assert_eq!(protocol_csv(&one).unwrap(), protocol_csv(&two).unwrap());
+    let shards: Vec<ShardFile> = (0..2)
+        .map(|i| {
+            let shard = Shard { index: i, count: 2 };
+            ShardFile {
+                header: s.header.clone(),
+                shard: [i, 2],
+                rows: run_on(&s, 2, Some(shard)),
+            }
+        })
+        .collect();
+    assert!(shards.iter().all(|f| !f.rows.is_empty()));
+    let (header, merged) = merge(shards.clone()).unwrap();
+    assert_eq!(header, s.header);
+    assert_eq!(protocol_csv(&merged).unwrap(), protocol_csv(&one).unwrap());
+    // Incomplete or overlapping shard sets are refused.
+    assert!(merge(vec![shards[0].clone()]).is_err());
+    assert!(merge(vec![
+        shards[0].clone(),
+        shards[0].clone(),
+        shards[1].clone()
+    ])
+    .is_err());
+}
+
+#[test]
+fn deformation_methods_win_on_carried_targets() {
+    let methods = Method::ALL;
+    for preset in ["t1", "t2"] {
+        let s = setup(preset, 150, 6, &methods);
+        let rows = run_on(&s, 2, None);
+        assert!(
+            rows.iter().all(|r| r.ok()),
+            "{preset}: a calibration failed"
+        );
+        let sum = summarise(&s.header, &rows);
+        for m in [Method::Dynamic, Method::Full] {
+            for key in [
+                "test_rmse_px",
+                "truth_mapping_error_px",
+                "truth_mapping_error_rot_px",
+            ] {
+                let (ours, standard) = (mean(&sum, m, key), mean(&sum, Method::Standard, key));
+                assert!(
+                    ours < standard,
+                    "{preset} {m} {key}: {ours} not below standard {standard}"
+                );
+            }
+            assert!(
+                mean(&sum, m, "truth_mapping_error_rot_px")
+                    < 0.5 * mean(&sum, Method::Standard, "truth_mapping_error_rot_px")
+            );
+        }
+        // Table S2: the dynamic method sees bends of the preset's size (T1 2.6 mm, T2 1.7 mm).
+        let bend = mean(&sum, Method::Dynamic, "max_out_of_plane_m");
+        assert!(bend > 1e-3 && bend < 5e-3, "{preset}: mean bend {bend}");
+    }
+}
+
+#[test]
+fn small_stiff_target_methods_are_close() {
+    let s = setup(
+        "t4",
+        150,
+        6,
+        &[Method::Standard, Method::Dynamic, Method::Full],
+    );
+    let sum = summarise(&s.header, &run_on(&s, 2, None));
+    let tests: Vec<f64> = [Method::Standard, Method::Dynamic, Method::Full]
+        .iter()
+        .map(|&m| mean(&sum, m, "test_rmse_px"))
+        .collect();
+    let (lo, hi) = tests
+        .iter()
+        .fold((f64::MAX, 0.0f64), |(a, b), &v| (a.min(v), b.max(v)));
+    assert!(hi / lo < 1.15, "T4 test errors differ too much: {tests:?}");
+}
+
+#[test]
+fn nothing_overfits_on_a_rigid_board() {
+    let s = setup("reference", 150, 6, &Method::ALL);
+    let sum = summarise(&s.header, &run_on(&s, 2, None));
+    let standard_test = mean(&sum, Method::Standard, "test_rmse_px");
+    for m in [Method::Static, Method::Dynamic, Method::Full] {
+        // Train error falls with more parameters; test error must not rise beyond noise.
+        assert!(mean(&sum, m, "rmse_px") <= mean(&sum, Method::Standard, "rmse_px") + 1e-9);
+        let t = mean(&sum, m, "test_rmse_px");
+        assert!(
+            t < standard_test * 1.02,
+            "{m}: test error {t} vs standard {standard_test}"
+        );
+    }
+}
+
+#[test]
+fn pose_only_refit_evaluates_like_the_general_problem() {
+    let s = setup("t2", 40, 1, &[Method::Standard]);
+    let r = s.reference.as_ref().unwrap();
+    let settings = SolverSettings::default();
+    let problem = |hold| Problem {
+        dataset: &r.dataset,
+        method: Method::Static,
+        gauge: r.gauge.clone(),
+        frozen: r.frozen.clone(),
+        hold,
+    };
+    let held = Hold {
+        intrinsics: true,
+        camera_poses: true,
+        corrections: true,
+        deformations: true,
+    };
+    let plain = SolverSettings {
+        loss: deformcal::config::Loss::None,
+        ..settings.clone()
+    };
+    let general = problem(Hold::default())
+        .evaluate(&r.state, &settings, false)
+        .unwrap();
+    for st in [&settings, &plain] {
+        let fast = problem(held).evaluate(&r.state, st, false).unwrap();
+        assert_eq!(fast.residuals.len(), general.residuals.len());
+        for (a, b) in fast.residuals.iter().zip(&general.residuals) {
+            assert!((a - b).abs() < 1e-9, "{a} vs {b}");
+        }
+    }
+}
+
+/// The whole command line: sharded and merged outputs equal one unsharded run's, file by file.
+#[test]
+fn cli_shards_merge_into_the_unsharded_outputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("p.toml");
+    std::fs::write(
+        &config,
+        "[data]\nsynthetic = \"t2\"\n[reference]\nsynthetic = \"reference\"\nimages = 60\n[protocol]\nsubsets = 3\nmethods = [\"standard\", \"dynamic\"]\n[output]\ndir = \"whole\"\n",
+    )
+    .unwrap();
+    let bin = env!("CARGO_BIN_EXE_deformcal");
+    let run = |args: &[&str]| {
+        let out = Command::new(bin).args(args).output().unwrap();
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    let c = config.to_str().unwrap();
+    run(&["protocol", "--config", c, "--threads", "1"]);
+    let shards = dir.path().join("shards");
+    for i in 0..2 {
+        run(&[
+            "protocol",
+            "--config",
+            c,
+            "--threads",
+            "2",
+            "--shard",
+            &format!("{i}/2"),
+            "--output",
+            shards.to_str().unwrap(),
+        ]);
+    }
+    let merged = dir.path().join("merged");
+    run(&[
+        "merge",
+        "--output",
+        merged.to_str().unwrap(),
+        shards.join("shard-0-of-2.json").to_str().unwrap(),
+        shards.join("shard-1-of-2.json").to_str().unwrap(),
+    ]);
+    let whole = dir.path().join("whole");
+    for f in [
+        "protocol.csv",
+        "summary.json",
+        "report.md",
+        "deformations.csv",
+        "rmse.svg",
+        "intrinsics.svg",
+        "mapping.svg",
+        "deformation.svg",
+    ] {
+        let a = std::fs::read(whole.join(f)).unwrap_or_else(|_| panic!("missing {f}"));
+        assert_eq!(a, std::fs::read(merged.join(f)).unwrap(), "{f} differs");
+    }
+    let csv = std::fs::read_to_string(whole.join("protocol.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + 3 * 2);
+    let report = std::fs::read_to_string(whole.join("report.md")).unwrap();
+    assert!(
+        report.contains("Train and test error") && report.contains("![mapping error](mapping.svg)")
+    );
+}
