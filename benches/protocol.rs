@@ -25,12 +25,8 @@ fn main() {
     let prepared = start.elapsed().as_secs_f64();
     let reference = setup.reference.as_ref().expect("reference");
     let t = Instant::now();
-    let e = test_rmse(
-        reference,
-        &setup.header.truth.expect("truth"),
-        &setup.settings,
-    )
-    .expect("refit");
+    let truth = setup.header.truth.as_ref().expect("truth");
+    let e = test_rmse(reference, 0, &truth[0], &setup.settings).expect("refit");
     println!(
         "reference calibration + data: {prepared:.2} s; one test-error refit on {} images: {:.0} ms (RMSE {e:.4})",
         reference.dataset.num_frames(),

@@ -8,6 +8,7 @@ use crate::problem::{
 };
 use crate::zhang;
 use nalgebra::{Matrix3, Vector2};
+use std::collections::HashMap;
 use std::time::Instant;
 
 /// Fewest corners an image needs to enter the calibration (a homography needs four).
@@ -91,90 +92,169 @@ impl Calibration {
     }
 }
 
-/// Drops images with fewer than [`MIN_CORNERS_PER_IMAGE`] corners, with a warning each.
-fn usable_frames(dataset: &Dataset, warnings: &mut Vec<String>) -> Vec<usize> {
-    let counts = dataset.counts_per_frame();
-    let mut keep = Vec::new();
-    for (j, &n) in counts.iter().enumerate() {
-        if n >= MIN_CORNERS_PER_IMAGE {
-            keep.push(j);
-        } else {
-            warnings.push(format!(
-                "frame {} skipped: {n} corner(s), at least {MIN_CORNERS_PER_IMAGE} needed",
-                dataset.frame_ids[j]
-            ));
-        }
+/// A view: what one camera saw in one frame.
+type View = (usize, usize);
+/// Board points and pixels of one view.
+type Correspondences = (Vec<Vector2<f64>>, Vec<Vector2<f64>>);
+
+fn view_name(dataset: &Dataset, (camera, frame): View) -> String {
+    if dataset.cameras.len() == 1 {
+        format!("frame {}", dataset.frame_ids[frame])
+    } else {
+        format!(
+            "{} frame {}",
+            dataset.cameras[camera].name, dataset.frame_ids[frame]
+        )
     }
-    keep
 }
 
-/// Homography of each frame seen by camera 0, `None` where it is degenerate.
-fn homographies(dataset: &Dataset) -> Vec<Option<Matrix3<f64>>> {
-    let mut board = vec![Vec::new(); dataset.num_frames()];
-    let mut image = vec![Vec::new(); dataset.num_frames()];
-    for o in dataset.observations.iter().filter(|o| o.camera == 0) {
+/// Board-to-pixel homography of every view, `None` for a degenerate one.
+fn homographies(dataset: &Dataset) -> HashMap<View, Option<Matrix3<f64>>> {
+    let mut points: HashMap<View, Correspondences> = HashMap::new();
+    for o in &dataset.observations {
         let p = dataset.target.nominal(o.corner);
-        board[o.frame].push(Vector2::new(p.x, p.y));
-        image[o.frame].push(Vector2::new(o.uv[0], o.uv[1]));
+        let e = points.entry((o.camera, o.frame)).or_default();
+        e.0.push(Vector2::new(p.x, p.y));
+        e.1.push(Vector2::new(o.uv[0], o.uv[1]));
     }
-    board
-        .iter()
-        .zip(&image)
-        .map(|(b, i)| zhang::homography(b, i))
+    points
+        .into_iter()
+        .map(|(view, (b, i))| {
+            let h = (b.len() >= MIN_CORNERS_PER_IMAGE)
+                .then(|| zhang::homography(&b, &i))
+                .flatten();
+            (view, h)
+        })
         .collect()
 }
 
-/// Zhang's initialisation of a single camera: intrinsics and one pose per frame.
-fn initialise(dataset: &Dataset, warnings: &mut Vec<String>) -> Result<(Dataset, State, bool)> {
-    let keep = usable_frames(dataset, warnings);
-    let dataset = dataset.subset(&keep);
-    let hs = homographies(&dataset);
-    let mut good = Vec::new();
-    for (j, h) in hs.iter().enumerate() {
-        match h {
-            Some(_) => good.push(j),
-            None => warnings.push(format!(
-                "frame {} skipped: its corners are collinear or degenerate",
-                dataset.frame_ids[j]
-            )),
-        }
+/// Keeps the views that have a homography (enough corners, not collinear), with a
+/// warning for each one dropped, and the frames that keep at least one view.
+fn usable_views(
+    dataset: &Dataset,
+    warnings: &mut Vec<String>,
+) -> (Dataset, HashMap<View, Matrix3<f64>>) {
+    let hs = homographies(dataset);
+    let mut counts: HashMap<View, usize> = HashMap::new();
+    for o in &dataset.observations {
+        *counts.entry((o.camera, o.frame)).or_default() += 1;
     }
-    if good.len() < MIN_IMAGES {
+    let mut dropped: Vec<View> = hs
+        .iter()
+        .filter(|(_, h)| h.is_none())
+        .map(|(v, _)| *v)
+        .collect();
+    dropped.sort_unstable_by_key(|&(c, f)| (f, c));
+    for v in &dropped {
+        let n = counts[v];
+        warnings.push(if n < MIN_CORNERS_PER_IMAGE {
+            format!(
+                "{} skipped: {n} corner(s), at least {MIN_CORNERS_PER_IMAGE} needed",
+                view_name(dataset, *v)
+            )
+        } else {
+            format!(
+                "{} skipped: its corners are collinear or degenerate",
+                view_name(dataset, *v)
+            )
+        });
+    }
+    let mut kept = dataset.clone();
+    kept.observations
+        .retain(|o| hs[&(o.camera, o.frame)].is_some());
+    let frames: Vec<usize> = (0..dataset.num_frames())
+        .filter(|&j| (0..dataset.cameras.len()).any(|k| matches!(hs.get(&(k, j)), Some(Some(_)))))
+        .collect();
+    let remap: HashMap<usize, usize> = frames
+        .iter()
+        .enumerate()
+        .map(|(new, &old)| (old, new))
+        .collect();
+    let hs = hs
+        .into_iter()
+        .filter_map(|((k, j), h)| Some(((k, *remap.get(&j)?), h?)))
+        .collect();
+    (kept.subset(&frames), hs)
+}
+
+/// Zhang's initialisation: intrinsics per camera, π_k from the views cameras share,
+/// and one board pose per frame.
+fn initialise(dataset: &Dataset, warnings: &mut Vec<String>) -> Result<(Dataset, State, bool)> {
+    let (dataset, hs) = usable_views(dataset, warnings);
+    if dataset.num_frames() < MIN_IMAGES {
         return Err(Error::Degenerate(format!(
             "{} usable image(s); a calibration needs at least {MIN_IMAGES}",
-            good.len()
+            dataset.num_frames()
         )));
     }
-    let dataset = dataset.subset(&good);
-    let hs: Vec<Matrix3<f64>> = good.iter().map(|&j| hs[j].expect("kept")).collect();
-    let cam = &dataset.cameras[0];
-    let (k, fallback) = zhang::initial_intrinsics(&hs, cam.width, cam.height)?;
-    if fallback {
-        warnings.push(
-            "Zhang's closed form was ill-conditioned; started from a centred principal point"
-                .into(),
-        );
+    let cameras = dataset.cameras.len();
+    let mut intrinsics = Vec::with_capacity(cameras);
+    let mut any_fallback = false;
+    let mut views: Vec<Vec<Option<Pose>>> = vec![vec![None; dataset.num_frames()]; cameras];
+    for (k, cam) in dataset.cameras.iter().enumerate() {
+        let own: Vec<(usize, Matrix3<f64>)> = (0..dataset.num_frames())
+            .filter_map(|j| hs.get(&(k, j)).map(|h| (j, *h)))
+            .collect();
+        if own.len() < MIN_IMAGES {
+            let what = format!(
+                "{} usable image(s); a calibration needs at least {MIN_IMAGES}",
+                own.len()
+            );
+            return Err(Error::Degenerate(if cameras == 1 {
+                what
+            } else {
+                format!("camera {}: {what}", cam.name)
+            }));
+        }
+        let list: Vec<Matrix3<f64>> = own.iter().map(|(_, h)| *h).collect();
+        let (kk, fallback) =
+            zhang::initial_intrinsics(&list, cam.width, cam.height).map_err(|e| {
+                if cameras == 1 {
+                    e
+                } else {
+                    Error::Init(format!("camera {}: {e}", cam.name))
+                }
+            })?;
+        if fallback {
+            any_fallback = true;
+            warnings.push(format!(
+                "{}: Zhang's closed form was ill-conditioned; started from a centred principal point",
+                cam.name
+            ));
+        }
+        for (j, h) in own {
+            views[k][j] = Some(zhang::pose_from_homography(&h, &kk).ok_or_else(|| {
+                Error::Init(format!(
+                    "{}: no board pose fits its homography",
+                    view_name(&dataset, (k, j))
+                ))
+            })?);
+        }
+        intrinsics.push(kk);
     }
-    let poses = hs
-        .iter()
-        .map(|h| zhang::pose_from_homography(h, &k))
-        .collect::<Option<Vec<Pose>>>()
-        .ok_or_else(|| {
-            Error::Init("a board pose could not be recovered from its homography".into())
-        })?;
-    let state = State::rigid(vec![k], vec![Pose::identity()], poses, &dataset.target);
-    Ok((dataset, state, fallback))
+    let names: Vec<String> = dataset.cameras.iter().map(|c| c.name.clone()).collect();
+    let rig = crate::rig::initial_rig(&views, &names)?;
+    // Π_j from the camera that sees most of the board in frame j.
+    let mut counts = vec![vec![0usize; dataset.num_frames()]; cameras];
+    for o in &dataset.observations {
+        counts[o.camera][o.frame] += 1;
+    }
+    let poses: Vec<Pose> = (0..dataset.num_frames())
+        .map(|j| {
+            let k = (0..cameras)
+                .filter(|&k| views[k][j].is_some())
+                .max_by_key(|&k| (counts[k][j], std::cmp::Reverse(k)))
+                .expect("every kept frame has a view");
+            rig[k].inverse().compose(&views[k][j].expect("chosen"))
+        })
+        .collect();
+    let state = State::rigid(intrinsics, rig, poses, &dataset.target);
+    Ok((dataset, state, any_fallback))
 }
 
 /// Runs the whole pipeline on one dataset.
 pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {
     let start = Instant::now();
-    if dataset.cameras.len() != 1 {
-        return Err(Error::Invalid(format!(
-            "{} cameras given; this version calibrates one camera at a time",
-            dataset.cameras.len()
-        )));
-    }
     let mut warnings = Vec::new();
     let (dataset, mut state, init_fallback) = initialise(dataset, &mut warnings)?;
     let initial_intrinsics = state.intrinsics.clone();

@@ -74,6 +74,7 @@ struct RawData {
     synthetic: Option<String>,
     images: Option<usize>,
     seed: Option<u64>,
+    cameras: Option<usize>,
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -83,6 +84,7 @@ struct RawReference {
     synthetic: Option<String>,
     images: Option<usize>,
     seed: Option<u64>,
+    cameras: Option<usize>,
     rows: Option<usize>,
     cols: Option<usize>,
     spacing: Option<f64>,
@@ -139,6 +141,8 @@ pub enum DataSource {
         preset: Preset,
         images: Option<usize>,
         seed: u64,
+        /// Number of cameras on the simulated rig.
+        cameras: usize,
     },
 }
 
@@ -218,6 +222,7 @@ impl Checker<'_> {
         synthetic: Option<String>,
         images: Option<usize>,
         seed: Option<u64>,
+        cameras: Option<usize>,
     ) -> Result<DataSource> {
         match (observations, synthetic) {
             (Some(_), Some(_)) => Err(self.err(format!(
@@ -227,9 +232,9 @@ impl Checker<'_> {
                 "[{table}] needs `observations` (a CSV file) or `synthetic` (a preset)"
             ))),
             (Some(p), None) => {
-                if images.is_some() || seed.is_some() {
+                if images.is_some() || seed.is_some() || cameras.is_some() {
                     return Err(self.err(format!(
-                        "{table}.images and {table}.seed apply to synthetic data only"
+                        "{table}.images, {table}.seed and {table}.cameras apply to synthetic data only"
                     )));
                 }
                 Ok(DataSource::Observations(self.base.join(p)))
@@ -244,10 +249,17 @@ impl Checker<'_> {
                 if images == Some(0) {
                     return Err(self.err(format!("{table}.images must be at least 1")));
                 }
+                let cameras = cameras.unwrap_or(preset.default_cameras());
+                if !(1..=16).contains(&cameras) {
+                    return Err(
+                        self.err(format!("{table}.cameras must be 1 to 16 (got {cameras})"))
+                    );
+                }
                 Ok(DataSource::Synthetic {
                     preset,
                     images,
                     seed: seed.unwrap_or(DEFAULT_SYNTHETIC_SEED),
+                    cameras,
                 })
             }
         }
@@ -282,9 +294,12 @@ impl Checker<'_> {
             raw.data.synthetic,
             raw.data.images,
             raw.data.seed,
+            raw.data.cameras,
         )?;
         let (target, cameras) = match &data {
-            DataSource::Synthetic { preset, .. } => {
+            DataSource::Synthetic {
+                preset, cameras: n, ..
+            } => {
                 let spec = preset.spec();
                 if let Some(t) = &raw.target {
                     if *t != spec.target {
@@ -295,8 +310,23 @@ impl Checker<'_> {
                     }
                 }
                 let cameras = if raw.cameras.is_empty() {
-                    preset.cameras()
+                    preset.cameras(*n)
+                } else if raw.cameras.len() != *n {
+                    return Err(self.err(format!(
+                        "[[cameras]] lists {} camera(s) but the synthetic rig has {n}; set data.cameras or remove [[cameras]]",
+                        raw.cameras.len()
+                    )));
                 } else {
+                    for (given, simulated) in raw.cameras.iter().zip(preset.cameras(*n)) {
+                        if (given.width, given.height, &given.model)
+                            != (simulated.width, simulated.height, &simulated.model)
+                        {
+                            return Err(self.err(format!(
+                                "[[cameras]] `{}` differs from the simulated {}×{} {} camera; only the name may be changed",
+                                given.name, simulated.width, simulated.height, simulated.model
+                            )));
+                        }
+                    }
                     raw.cameras.clone()
                 };
                 (spec.target, cameras)
@@ -338,8 +368,14 @@ impl Checker<'_> {
         let reference = match raw.reference {
             None => None,
             Some(r) => {
-                let source =
-                    self.source("reference", r.observations, r.synthetic, r.images, r.seed)?;
+                let source = self.source(
+                    "reference",
+                    r.observations,
+                    r.synthetic,
+                    r.images,
+                    r.seed,
+                    r.cameras,
+                )?;
                 let default_target = match &source {
                     DataSource::Synthetic { preset, .. } => preset.spec().target,
                     DataSource::Observations(_) => target,

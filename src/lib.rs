@@ -16,6 +16,7 @@ pub mod problem;
 pub mod protocol;
 pub mod protocol_report;
 pub mod report;
+pub mod rig;
 pub mod synthetic;
 pub mod target;
 pub mod zhang;
@@ -44,8 +45,15 @@ pub fn load_source(
             preset,
             images,
             seed,
+            cameras: n,
         } => {
-            let (d, t) = synthetic::generate(*preset, *images, *seed);
+            let (mut d, t) = synthetic::Generator::new(*preset, *images, *seed)
+                .with_cameras(*n)
+                .generate();
+            // The config may rename the simulated cameras.
+            for (spec, given) in d.cameras.iter_mut().zip(cameras) {
+                spec.name = given.name.clone();
+            }
             Ok((d, Some(t)))
         }
     }

@@ -3,7 +3,7 @@
 //! sharded if asked.
 use crate::calibrate::{calibrate, Calibration, Request};
 use crate::camera::Intrinsics;
-use crate::config::{Config, ProtocolConfig};
+use crate::config::{CameraSpec, Config, ProtocolConfig};
 use crate::deformation::{Method, Paraboloid};
 use crate::error::{Error, Result};
 use crate::metrics::{mapping_error, mapping_error_rot};
@@ -51,11 +51,11 @@ pub struct Header {
     pub seed: u64,
     pub methods: Vec<Method>,
     pub target: Target,
-    pub width: u32,
-    pub height: u32,
+    pub cameras: Vec<CameraSpec>,
     pub dataset_images: usize,
     pub reference: Option<ReferenceInfo>,
-    pub truth: Option<Intrinsics>,
+    /// True intrinsics per camera (synthetic data).
+    pub truth: Option<Vec<Intrinsics>>,
 }
 
 impl Header {
@@ -68,7 +68,8 @@ impl Header {
 /// The reference calibration as the report shows it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ReferenceInfo {
-    pub intrinsics: Intrinsics,
+    /// Per camera.
+    pub intrinsics: Vec<Intrinsics>,
     pub rmse_px: f64,
     pub images: usize,
     pub observations: usize,
@@ -87,18 +88,27 @@ pub struct Row {
     pub converged: bool,
     pub iterations: i32,
     pub rmse_px: Option<f64>,
-    pub test_rmse_px: Option<f64>,
-    pub mapping_error_px: Option<f64>,
-    pub mapping_error_rot_px: Option<f64>,
-    pub truth_mapping_error_px: Option<f64>,
-    pub truth_mapping_error_rot_px: Option<f64>,
-    pub intrinsics: Option<Intrinsics>,
+    /// Per camera (empty when the calibration failed).
+    pub cameras: Vec<CameraRow>,
     /// User frame ids of the subset's images, in order.
     pub frames: Vec<i64>,
     /// The per-image paraboloid (methods that have one).
     pub deformations: Vec<Paraboloid>,
     /// `max_out_of_plane_m` per image (methods that have a paraboloid).
     pub max_out_of_plane_m: Vec<f64>,
+}
+
+/// One camera's results in a [`Row`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CameraRow {
+    pub intrinsics: Intrinsics,
+    /// π_k: camera-k-from-camera-0.
+    pub pose: crate::camera::Pose,
+    pub test_rmse_px: Option<f64>,
+    pub mapping_error_px: Option<f64>,
+    pub mapping_error_rot_px: Option<f64>,
+    pub truth_mapping_error_px: Option<f64>,
+    pub truth_mapping_error_rot_px: Option<f64>,
 }
 
 impl Row {
@@ -150,11 +160,6 @@ pub struct Setup {
 /// Loads the data, runs the reference calibration and draws the subsets.
 pub fn prepare(config: &Config, protocol: &ProtocolConfig) -> Result<Setup> {
     let (dataset, truth) = crate::load_source(&config.data, config.target, &config.cameras)?;
-    if dataset.cameras.len() != 1 {
-        return Err(Error::Invalid(
-            "the protocol runs on single-camera datasets".into(),
-        ));
-    }
     // One Ceres thread per solve: parallelism comes from running tasks side by side,
     // and single-threaded solves sum in a fixed order, so results are reproducible.
     let settings = SolverSettings {
@@ -165,6 +170,13 @@ pub fn prepare(config: &Config, protocol: &ProtocolConfig) -> Result<Setup> {
         None => None,
         Some(r) => {
             let (ref_data, _) = crate::load_source(&r.source, r.target, &config.cameras)?;
+            if ref_data.cameras.len() != dataset.cameras.len() {
+                return Err(Error::Invalid(format!(
+                    "the reference set has {} camera(s) but the data has {}; set reference.cameras",
+                    ref_data.cameras.len(),
+                    dataset.cameras.len()
+                )));
+            }
             let request = Request {
                 method: Method::Static,
                 settings: settings.clone(),
@@ -185,7 +197,6 @@ pub fn prepare(config: &Config, protocol: &ProtocolConfig) -> Result<Setup> {
         protocol.subsets,
         protocol.seed,
     )?;
-    let cam = &dataset.cameras[0];
     let header = Header {
         dataset: dataset_name(config),
         subsets: protocol.subsets,
@@ -193,17 +204,16 @@ pub fn prepare(config: &Config, protocol: &ProtocolConfig) -> Result<Setup> {
         seed: protocol.seed,
         methods: protocol.methods.clone(),
         target: dataset.target,
-        width: cam.width,
-        height: cam.height,
+        cameras: dataset.cameras.clone(),
         dataset_images: dataset.num_frames(),
         reference: reference.as_ref().map(|c| ReferenceInfo {
-            intrinsics: c.state.intrinsics[0],
+            intrinsics: c.state.intrinsics.clone(),
             rmse_px: c.rmse_px,
             images: c.dataset.num_frames(),
             observations: c.dataset.observations.len(),
             converged: c.converged,
         }),
-        truth: truth.as_ref().map(|t| t.intrinsics[0]),
+        truth: truth.as_ref().map(|t| t.intrinsics.clone()),
     };
     Ok(Setup {
         header,
@@ -222,11 +232,13 @@ fn dataset_name(config: &Config) -> String {
     }
 }
 
-/// `test_rmse_px`: the reference set refitted with only its poses free, the given
-/// intrinsics and the reference static correction held.  The refit is plain least
-/// squares: the reference set is clean, and the RMSE is a least-squares figure.
+/// `test_rmse_px` of camera `k`: its views of the reference set refitted with only
+/// the board poses free, the given intrinsics and the reference static correction
+/// held.  The refit is plain least squares: the reference set is clean, and the
+/// RMSE is a least-squares figure.
 pub fn test_rmse(
     reference: &Calibration,
+    k: usize,
     intrinsics: &Intrinsics,
     settings: &SolverSettings,
 ) -> Result<f64> {
@@ -234,12 +246,37 @@ pub fn test_rmse(
         loss: crate::config::Loss::None,
         ..settings.clone()
     };
+    let r = &reference.dataset;
+    let dataset = Dataset {
+        cameras: vec![r.cameras[k].clone()],
+        observations: r
+            .observations
+            .iter()
+            .filter(|o| o.camera == k)
+            .map(|o| crate::observations::Observation { camera: 0, ..*o })
+            .collect(),
+        ..r.clone()
+    };
+    if dataset.observations.is_empty() {
+        return Err(Error::Degenerate(format!(
+            "camera {} has no reference observations",
+            r.cameras[k].name
+        )));
+    }
+    let pi = reference.state.camera_poses[k];
     let mut state = State {
         intrinsics: vec![*intrinsics],
+        camera_poses: vec![crate::camera::Pose::identity()],
+        frame_poses: reference
+            .state
+            .frame_poses
+            .iter()
+            .map(|p| pi.compose(p))
+            .collect(),
         ..reference.state.clone()
     };
     let problem = Problem {
-        dataset: &reference.dataset,
+        dataset: &dataset,
         method: Method::Static,
         gauge: reference.gauge.clone(),
         frozen: reference.frozen.clone(),
@@ -269,12 +306,7 @@ impl Setup {
             converged: false,
             iterations: 0,
             rmse_px: None,
-            test_rmse_px: None,
-            mapping_error_px: None,
-            mapping_error_rot_px: None,
-            truth_mapping_error_px: None,
-            truth_mapping_error_rot_px: None,
-            intrinsics: None,
+            cameras: Vec::new(),
             frames: data.frame_ids.clone(),
             deformations: Vec::new(),
             max_out_of_plane_m: Vec::new(),
@@ -291,28 +323,45 @@ impl Setup {
                 return row;
             }
         };
-        let k = c.state.intrinsics[0];
-        let (w, h) = (self.header.width, self.header.height);
         row.images = c.dataset.num_frames();
         row.observations = c.dataset.observations.len();
         row.frames = c.dataset.frame_ids.clone();
         row.converged = c.converged;
         row.iterations = c.iterations();
         row.rmse_px = Some(c.rmse_px);
-        row.intrinsics = Some(k);
-        if let Some(r) = &self.reference {
-            let rk = r.state.intrinsics[0];
-            row.mapping_error_px = finite(mapping_error(&rk, &k, w, h));
-            row.mapping_error_rot_px = finite(mapping_error_rot(&rk, &k, w, h));
-            match test_rmse(r, &k, &self.settings) {
-                Ok(e) => row.test_rmse_px = finite(e),
-                Err(e) => row.error = Some(format!("test error: {e}")),
-            }
-        }
-        if let Some(t) = &self.truth {
-            let tk = t.intrinsics[0];
-            row.truth_mapping_error_px = finite(mapping_error(&tk, &k, w, h));
-            row.truth_mapping_error_rot_px = finite(mapping_error_rot(&tk, &k, w, h));
+        for (k, cam) in self.header.cameras.iter().enumerate() {
+            let theta = c.state.intrinsics[k];
+            let (w, h) = (cam.width, cam.height);
+            let against = |other: Option<&Intrinsics>| {
+                other.map_or((None, None), |o| {
+                    (
+                        finite(mapping_error(o, &theta, w, h)),
+                        finite(mapping_error_rot(o, &theta, w, h)),
+                    )
+                })
+            };
+            let (mapping, mapping_rot) =
+                against(self.reference.as_ref().map(|r| &r.state.intrinsics[k]));
+            let (truth, truth_rot) = against(self.truth.as_ref().map(|t| &t.intrinsics[k]));
+            let test = match &self.reference {
+                None => None,
+                Some(r) => match test_rmse(r, k, &theta, &self.settings) {
+                    Ok(e) => finite(e),
+                    Err(e) => {
+                        row.error = Some(format!("test error of {}: {e}", cam.name));
+                        None
+                    }
+                },
+            };
+            row.cameras.push(CameraRow {
+                intrinsics: theta,
+                pose: c.state.camera_poses[k],
+                test_rmse_px: test,
+                mapping_error_px: mapping,
+                mapping_error_rot_px: mapping_rot,
+                truth_mapping_error_px: truth,
+                truth_mapping_error_rot_px: truth_rot,
+            });
         }
         if method.has_paraboloid() {
             row.deformations = c.state.deformations.clone();

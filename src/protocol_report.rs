@@ -5,7 +5,7 @@ use crate::deformation::Method;
 use crate::error::{Error, Result};
 use crate::output::write_atomic;
 use crate::plots::{self, HLine, Series, PALETTE};
-use crate::protocol::{Header, Row};
+use crate::protocol::{CameraRow, Header, Row};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::fmt::Write;
@@ -59,31 +59,45 @@ pub struct Summary {
 }
 
 type Getter = fn(&Row) -> Vec<f64>;
+type CameraGetter = fn(&CameraRow) -> Option<f64>;
 
 fn opt(v: Option<f64>) -> Vec<f64> {
     v.into_iter().collect()
 }
 
-/// The metrics summarised per method, in report order.
-const METRICS: [(&str, Getter); 15] = [
+/// Metrics of the whole calibration, summarised per method.
+const ROW_METRICS: [(&str, Getter); 3] = [
     ("rmse_px", |r| opt(r.rmse_px)),
-    ("test_rmse_px", |r| opt(r.test_rmse_px)),
-    ("mapping_error_px", |r| opt(r.mapping_error_px)),
-    ("mapping_error_rot_px", |r| opt(r.mapping_error_rot_px)),
-    ("truth_mapping_error_px", |r| opt(r.truth_mapping_error_px)),
-    ("truth_mapping_error_rot_px", |r| {
-        opt(r.truth_mapping_error_rot_px)
-    }),
     ("max_out_of_plane_m", |r| r.max_out_of_plane_m.clone()),
-    ("fx", |r| opt(r.intrinsics.map(|k| k.fx))),
-    ("fy", |r| opt(r.intrinsics.map(|k| k.fy))),
-    ("cx", |r| opt(r.intrinsics.map(|k| k.cx))),
-    ("cy", |r| opt(r.intrinsics.map(|k| k.cy))),
-    ("k1", |r| opt(r.intrinsics.map(|k| k.k1))),
-    ("k2", |r| opt(r.intrinsics.map(|k| k.k2))),
-    ("k3", |r| opt(r.intrinsics.map(|k| k.k3))),
     ("iterations", |r| vec![r.iterations as f64]),
 ];
+
+/// Metrics of each camera, summarised per method (prefixed `camera/` with several cameras).
+const CAMERA_METRICS: [(&str, CameraGetter); 12] = [
+    ("test_rmse_px", |c| c.test_rmse_px),
+    ("mapping_error_px", |c| c.mapping_error_px),
+    ("mapping_error_rot_px", |c| c.mapping_error_rot_px),
+    ("truth_mapping_error_px", |c| c.truth_mapping_error_px),
+    ("truth_mapping_error_rot_px", |c| {
+        c.truth_mapping_error_rot_px
+    }),
+    ("fx", |c| Some(c.intrinsics.fx)),
+    ("fy", |c| Some(c.intrinsics.fy)),
+    ("cx", |c| Some(c.intrinsics.cx)),
+    ("cy", |c| Some(c.intrinsics.cy)),
+    ("k1", |c| Some(c.intrinsics.k1)),
+    ("k2", |c| Some(c.intrinsics.k2)),
+    ("k3", |c| Some(c.intrinsics.k3)),
+];
+
+/// The summary key of a per-camera metric: bare for one camera, `camera/metric` otherwise.
+pub fn camera_key(header: &Header, k: usize, metric: &str) -> String {
+    if header.cameras.len() == 1 {
+        metric.to_string()
+    } else {
+        format!("{}/{metric}", header.cameras[k].name)
+    }
+}
 
 /// Summarises rows per method.
 pub fn summarise(header: &Header, rows: &[Row]) -> Summary {
@@ -92,9 +106,17 @@ pub fn summarise(header: &Header, rows: &[Row]) -> Summary {
         let all: Vec<&Row> = rows.iter().filter(|r| r.method == m).collect();
         let ok: Vec<&Row> = all.iter().copied().filter(|r| r.ok()).collect();
         let mut metrics = BTreeMap::new();
-        for (name, get) in METRICS {
+        for (name, get) in ROW_METRICS {
             if let Some(s) = Stat::of(ok.iter().flat_map(|r| get(r))) {
                 metrics.insert(name.to_string(), s);
+            }
+        }
+        for k in 0..header.cameras.len() {
+            for (name, get) in CAMERA_METRICS {
+                if let Some(s) = Stat::of(ok.iter().filter_map(|r| r.cameras.get(k).and_then(get)))
+                {
+                    metrics.insert(camera_key(header, k, name), s);
+                }
             }
         }
         methods.insert(
@@ -117,13 +139,14 @@ fn cell(v: Option<f64>) -> String {
     v.map(|x| x.to_string()).unwrap_or_default()
 }
 
-/// `protocol.csv`: one row per subset × method.
-pub fn protocol_csv(rows: &[Row]) -> Result<Vec<u8>> {
+/// `protocol.csv`: one row per subset × method (× camera, with several cameras).
+pub fn protocol_csv(header: &Header, rows: &[Row]) -> Result<Vec<u8>> {
     let mut w = csv::Writer::from_writer(Vec::new());
     let to_err = |e: csv::Error| Error::Invalid(format!("protocol.csv: {e}"));
-    w.write_record([
+    let mut columns = vec![
         "subset",
         "method",
+        "camera",
         "status",
         "error",
         "images",
@@ -131,58 +154,34 @@ pub fn protocol_csv(rows: &[Row]) -> Result<Vec<u8>> {
         "converged",
         "iterations",
         "rmse_px",
-        "test_rmse_px",
-        "mapping_error_px",
-        "mapping_error_rot_px",
-        "truth_mapping_error_px",
-        "truth_mapping_error_rot_px",
-        "max_out_of_plane_m_mean",
-        "max_out_of_plane_m_max",
-        "fx",
-        "fy",
-        "cx",
-        "cy",
-        "k1",
-        "k2",
-        "k3",
-    ])
-    .map_err(to_err)?;
+    ];
+    columns.extend(CAMERA_METRICS[..5].iter().map(|(n, _)| *n));
+    columns.extend(["max_out_of_plane_m_mean", "max_out_of_plane_m_max"]);
+    columns.extend(CAMERA_METRICS[5..].iter().map(|(n, _)| *n));
+    w.write_record(&columns).map_err(to_err)?;
     for r in rows {
         let bends = Stat::of(r.max_out_of_plane_m.iter().copied()).map(|s| s.mean);
         let max_bend = r.max_out_of_plane_m.iter().copied().reduce(f64::max);
-        let k = r.intrinsics;
-        let mut rec = vec![
-            r.subset.to_string(),
-            r.method.name().to_string(),
-            if r.ok() { "ok" } else { "failed" }.to_string(),
-            r.error.clone().unwrap_or_default(),
-            r.images.to_string(),
-            r.observations.to_string(),
-            r.converged.to_string(),
-            r.iterations.to_string(),
-        ];
-        rec.extend(
-            [
-                r.rmse_px,
-                r.test_rmse_px,
-                r.mapping_error_px,
-                r.mapping_error_rot_px,
-                r.truth_mapping_error_px,
-                r.truth_mapping_error_rot_px,
-                bends,
-                max_bend,
-                k.map(|k| k.fx),
-                k.map(|k| k.fy),
-                k.map(|k| k.cx),
-                k.map(|k| k.cy),
-                k.map(|k| k.k1),
-                k.map(|k| k.k2),
-                k.map(|k| k.k3),
-            ]
-            .into_iter()
-            .map(cell),
-        );
-        w.write_record(&rec).map_err(to_err)?;
+        for (k, cam) in header.cameras.iter().enumerate() {
+            let c = r.cameras.get(k);
+            let mut rec = vec![
+                r.subset.to_string(),
+                r.method.name().to_string(),
+                cam.name.clone(),
+                if r.ok() { "ok" } else { "failed" }.to_string(),
+                r.error.clone().unwrap_or_default(),
+                r.images.to_string(),
+                r.observations.to_string(),
+                r.converged.to_string(),
+                r.iterations.to_string(),
+                cell(r.rmse_px),
+            ];
+            let metric = |i: usize| cell(c.and_then(CAMERA_METRICS[i].1));
+            rec.extend((0..5).map(metric));
+            rec.extend([cell(bends), cell(max_bend)]);
+            rec.extend((5..CAMERA_METRICS.len()).map(metric));
+            w.write_record(&rec).map_err(to_err)?;
+        }
     }
     w.into_inner()
         .map_err(|e| Error::Invalid(format!("protocol.csv: {e}")))
@@ -221,17 +220,24 @@ fn pm(s: Option<&Stat>, scale: f64, digits: usize) -> String {
     }
 }
 
-fn groups(header: &Header, rows: &[Row], get: Getter) -> Vec<Vec<f64>> {
+fn groups(header: &Header, rows: &[Row], get: impl Fn(&Row) -> Vec<f64>) -> Vec<Vec<f64>> {
     header
         .methods
         .iter()
         .map(|&m| {
             rows.iter()
                 .filter(|r| r.method == m && r.ok())
-                .flat_map(get)
+                .flat_map(&get)
                 .collect()
         })
         .collect()
+}
+
+/// Per-camera values of one metric across rows, grouped per method.
+fn camera_groups(header: &Header, rows: &[Row], k: usize, get: CameraGetter) -> Vec<Vec<f64>> {
+    groups(header, rows, |r| {
+        r.cameras.get(k).and_then(get).into_iter().collect()
+    })
 }
 
 /// The report's markdown for one dataset; `prefix` is prepended to plot links.
@@ -239,47 +245,89 @@ pub fn report_markdown(summary: &Summary, rows: &[Row], prefix: &str) -> String 
     let h = &summary.header;
     let mut s = String::new();
     let get = |m: Method, k: &str| summary.methods.get(m.name()).and_then(|x| x.metrics.get(k));
+    let several = h.cameras.len() > 1;
+    // "method" or "method, camera" labels for per-camera table rows.
+    let label = |m: Method, k: usize| {
+        if several {
+            format!("{m}, {}", h.cameras[k].name)
+        } else {
+            m.to_string()
+        }
+    };
     let _ = writeln!(s, "## Dataset `{}`\n", h.dataset);
+    let cams: Vec<String> = h
+        .cameras
+        .iter()
+        .map(|c| format!("{} {}×{}", c.name, c.width, c.height))
+        .collect();
     let _ = writeln!(
         s,
-        "{} subsets × {} images drawn from {} images (seed {}); board {} × {} corners, {} m; camera {}×{}.\n",
-        h.subsets, h.images_per_subset, h.dataset_images, h.seed, h.target.rows, h.target.cols, h.target.spacing, h.width, h.height
+        "{} subsets × {} images drawn from {} images (seed {}); board {} × {} corners, {} m; camera(s) {}.\n",
+        h.subsets, h.images_per_subset, h.dataset_images, h.seed, h.target.rows, h.target.cols, h.target.spacing, cams.join(", ")
     );
     if let Some(r) = &h.reference {
         let _ = writeln!(
             s,
-            "Reference calibration: `static` on {} images ({} observations), RMSE {:.4} px{}; fx {:.2}, fy {:.2}, cx {:.2}, cy {:.2}.\n",
+            "Reference calibration: `static` on {} images ({} observations), RMSE {:.4} px{}.",
             r.images,
             r.observations,
             r.rmse_px,
-            if r.converged { "" } else { " (did not converge)" },
-            r.intrinsics.fx,
-            r.intrinsics.fy,
-            r.intrinsics.cx,
-            r.intrinsics.cy
+            if r.converged {
+                ""
+            } else {
+                " (did not converge)"
+            }
         );
+        for (k, i) in r.intrinsics.iter().enumerate() {
+            let _ = writeln!(
+                s,
+                "- {}: fx {:.2}, fy {:.2}, cx {:.2}, cy {:.2}",
+                h.cameras[k].name, i.fx, i.fy, i.cx, i.cy
+            );
+        }
+        s.push('\n');
     }
     if let Some(t) = &h.truth {
-        let _ = writeln!(
-            s,
-            "Ground truth (synthetic): fx {:.2}, fy {:.2}, cx {:.2}, cy {:.2}.\n",
-            t.fx, t.fy, t.cx, t.cy
-        );
+        let _ = writeln!(s, "Ground truth (synthetic):");
+        for (k, i) in t.iter().enumerate() {
+            let _ = writeln!(
+                s,
+                "- {}: fx {:.2}, fy {:.2}, cx {:.2}, cy {:.2}",
+                h.cameras[k].name, i.fx, i.fy, i.cx, i.cy
+            );
+        }
+        s.push('\n');
     }
     let _ = writeln!(s, "### Train and test error (paper Fig. 3a)\n");
+    let test_heads: Vec<String> = h
+        .cameras
+        .iter()
+        .map(|c| {
+            if several {
+                format!("test RMSE {} (px)", c.name)
+            } else {
+                "test RMSE (px)".into()
+            }
+        })
+        .collect();
     let _ = writeln!(
         s,
-        "| method | calibrations (failed) | train RMSE (px) | test RMSE (px) |\n|---|---|---|---|"
+        "| method | calibrations (failed) | train RMSE (px) | {} |\n|---|---|---|{}",
+        test_heads.join(" | "),
+        "---|".repeat(h.cameras.len())
     );
     for &m in &h.methods {
         let ms = &summary.methods[m.name()];
+        let tests: Vec<String> = (0..h.cameras.len())
+            .map(|k| pm(get(m, &camera_key(h, k, "test_rmse_px")), 1.0, 4))
+            .collect();
         let _ = writeln!(
             s,
             "| {m} | {} ({}) | {} | {} |",
             ms.calibrations,
             ms.failed,
             pm(get(m, "rmse_px"), 1.0, 4),
-            pm(get(m, "test_rmse_px"), 1.0, 4)
+            tests.join(" | ")
         );
     }
     let _ = writeln!(s, "\n![train and test RMSE]({prefix}rmse.svg)\n");
@@ -288,15 +336,14 @@ pub fn report_markdown(summary: &Summary, rows: &[Row], prefix: &str) -> String 
         s,
         "| method | fx (px) | fy (px) | cx (px) | cy (px) |\n|---|---|---|---|---|"
     );
-    for &m in &h.methods {
-        let _ = writeln!(
-            s,
-            "| {m} | {} | {} | {} | {} |",
-            pm(get(m, "fx"), 1.0, 2),
-            pm(get(m, "fy"), 1.0, 2),
-            pm(get(m, "cx"), 1.0, 2),
-            pm(get(m, "cy"), 1.0, 2)
-        );
+    for k in 0..h.cameras.len() {
+        for &m in &h.methods {
+            let v: Vec<String> = ["fx", "fy", "cx", "cy"]
+                .iter()
+                .map(|n| pm(get(m, &camera_key(h, k, n)), 1.0, 2))
+                .collect();
+            let _ = writeln!(s, "| {} | {} |", label(m, k), v.join(" | "));
+        }
     }
     let _ = writeln!(s, "\n![fx and cx]({prefix}intrinsics.svg)\n");
     let _ = writeln!(s, "### Mapping error (paper Fig. 4b)\n");
@@ -304,15 +351,19 @@ pub fn report_markdown(summary: &Summary, rows: &[Row], prefix: &str) -> String 
         s,
         "| method | to reference (px) | to reference, rotation removed (px) | to truth (px) | to truth, rotation removed (px) |\n|---|---|---|---|---|"
     );
-    for &m in &h.methods {
-        let _ = writeln!(
-            s,
-            "| {m} | {} | {} | {} | {} |",
-            pm(get(m, "mapping_error_px"), 1.0, 3),
-            pm(get(m, "mapping_error_rot_px"), 1.0, 3),
-            pm(get(m, "truth_mapping_error_px"), 1.0, 3),
-            pm(get(m, "truth_mapping_error_rot_px"), 1.0, 3)
-        );
+    for k in 0..h.cameras.len() {
+        for &m in &h.methods {
+            let v: Vec<String> = [
+                "mapping_error_px",
+                "mapping_error_rot_px",
+                "truth_mapping_error_px",
+                "truth_mapping_error_rot_px",
+            ]
+            .iter()
+            .map(|n| pm(get(m, &camera_key(h, k, n)), 1.0, 3))
+            .collect();
+            let _ = writeln!(s, "| {} | {} |", label(m, k), v.join(" | "));
+        }
     }
     let _ = writeln!(s, "\n![mapping error]({prefix}mapping.svg)\n");
     let bending: Vec<Method> = h
@@ -371,78 +422,110 @@ fn most_bent(rows: &[Row]) -> Option<(&Row, usize)> {
 pub fn write_plots(dir: &Path, summary: &Summary, rows: &[Row]) -> Result<()> {
     let h = &summary.header;
     let cats: Vec<String> = h.methods.iter().map(|m| m.name().to_string()).collect();
-    let series = |name: &'static str, color, get: Getter| Series {
-        name,
-        color,
-        groups: groups(h, rows, get),
+    let several = h.cameras.len() > 1;
+    let named = |base: &str, k: usize| {
+        if several {
+            format!("{base} {}", h.cameras[k].name)
+        } else {
+            base.to_string()
+        }
     };
+    let colour = |i: usize| PALETTE[i % PALETTE.len()];
+    // Series names must outlive the charts.
+    let test_names: Vec<String> = (0..h.cameras.len()).map(|k| named("test", k)).collect();
+    let mut rmse = vec![Series {
+        name: "train",
+        color: colour(0),
+        groups: groups(h, rows, |r| opt(r.rmse_px)),
+    }];
+    for (k, name) in test_names.iter().enumerate() {
+        rmse.push(Series {
+            name,
+            color: colour(k + 1),
+            groups: camera_groups(h, rows, k, |c| c.test_rmse_px),
+        });
+    }
     plots::strip_chart_svg(
         &dir.join("rmse.svg"),
         &format!("{}: train and test RMSE", h.dataset),
         "RMSE (px)",
         &cats,
-        &[
-            series("train", PALETTE[0], |r| opt(r.rmse_px)),
-            series("test", PALETTE[1], |r| opt(r.test_rmse_px)),
-        ],
+        &rmse,
         &[],
     )?;
-    let ref_lines = |f: fn(&crate::camera::Intrinsics) -> f64| {
+
+    // Intrinsics of camera 0, with the reference and the truth.
+    let lines = |f: fn(&crate::camera::Intrinsics) -> f64| {
         let mut lines = Vec::new();
         if let Some(r) = &h.reference {
             lines.push(HLine {
-                value: f(&r.intrinsics),
+                value: f(&r.intrinsics[0]),
                 name: "reference",
                 color: BLACK_RGB,
             });
         }
         if let Some(t) = &h.truth {
             lines.push(HLine {
-                value: f(t),
+                value: f(&t[0]),
                 name: "truth",
                 color: PALETTE[3],
             });
         }
         lines
     };
-    let fx_lines = ref_lines(|k| k.fx);
-    let cx_lines = ref_lines(|k| k.cx);
+    let (fx_name, cx_name) = (named("fx", 0), named("cx", 0));
     plots::panels_svg(
         &dir.join("intrinsics.svg"),
         &[
             (
                 "fx",
                 "fx (px)",
-                vec![series("fx", PALETTE[0], |r| {
-                    opt(r.intrinsics.map(|k| k.fx))
-                })],
-                fx_lines,
+                vec![Series {
+                    name: &fx_name,
+                    color: colour(0),
+                    groups: camera_groups(h, rows, 0, |c| Some(c.intrinsics.fx)),
+                }],
+                lines(|k| k.fx),
             ),
             (
                 "cx",
                 "cx (px)",
-                vec![series("cx", PALETTE[2], |r| {
-                    opt(r.intrinsics.map(|k| k.cx))
-                })],
-                cx_lines,
+                vec![Series {
+                    name: &cx_name,
+                    color: colour(2),
+                    groups: camera_groups(h, rows, 0, |c| Some(c.intrinsics.cx)),
+                }],
+                lines(|k| k.cx),
             ),
         ],
         &cats,
     )?;
-    let mut mapping = Vec::new();
-    if h.reference.is_some() {
-        mapping.push(series("to reference", PALETTE[0], |r| {
-            opt(r.mapping_error_px)
-        }));
+
+    let mut names = Vec::new();
+    for k in 0..h.cameras.len() {
+        if h.reference.is_some() {
+            names.push((
+                named("to reference", k),
+                k,
+                (|c| c.mapping_error_px) as CameraGetter,
+            ));
+        }
+        if h.truth.is_some() {
+            names.push((named("to truth", k), k, |c| c.truth_mapping_error_px));
+            names.push((named("to truth, rotation removed", k), k, |c| {
+                c.truth_mapping_error_rot_px
+            }));
+        }
     }
-    if h.truth.is_some() {
-        mapping.push(series("to truth", PALETTE[3], |r| {
-            opt(r.truth_mapping_error_px)
-        }));
-        mapping.push(series("to truth, rotation removed", PALETTE[2], |r| {
-            opt(r.truth_mapping_error_rot_px)
-        }));
-    }
+    let mapping: Vec<Series> = names
+        .iter()
+        .enumerate()
+        .map(|(i, (name, k, get))| Series {
+            name,
+            color: colour(i),
+            groups: camera_groups(h, rows, *k, *get),
+        })
+        .collect();
     plots::strip_chart_svg(
         &dir.join("mapping.svg"),
         &format!("{}: mapping error", h.dataset),
@@ -476,7 +559,7 @@ pub fn write_outputs(dir: &Path, header: &Header, rows: &[Row]) -> Result<Summar
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let summary = summarise(header, rows);
     write_plots(dir, &summary, rows)?;
-    write_atomic(&dir.join("protocol.csv"), &protocol_csv(rows)?)?;
+    write_atomic(&dir.join("protocol.csv"), &protocol_csv(header, rows)?)?;
     write_atomic(&dir.join("deformations.csv"), &deformations_csv(rows))?;
     let json = serde_json::to_string_pretty(&summary).expect("summary serialises");
     write_atomic(&dir.join("summary.json"), json.as_bytes())?;

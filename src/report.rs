@@ -33,6 +33,19 @@ pub fn summary(c: &Calibration) -> String {
             cam.name, cam.width, cam.height, i.fx, i.fy, i.cx, i.cy, i.k1, i.k2, i.k3
         );
     }
+    for (k, cam) in d.cameras.iter().enumerate().skip(1) {
+        let pose = c.state.camera_poses[k];
+        // The baseline is the distance between the optical centres.
+        let centre = pose.inverse().translation_vector();
+        let _ = writeln!(
+            s,
+            "  {} from {}: baseline {:.4} m, rotation {:.3}°",
+            cam.name,
+            d.cameras[0].name,
+            centre.norm(),
+            pose.rotation_matrix().angle().to_degrees()
+        );
+    }
     if c.method.has_paraboloid() {
         let _ = writeln!(
             s,

@@ -31,6 +31,8 @@ pub enum Preset {
     T4,
     /// T2 lying still on the ground, camera moving; static error only.
     Reference,
+    /// T2 carried in front of a stereo pair 0.3 m apart.
+    Stereo,
 }
 
 /// What a preset generates.
@@ -55,7 +57,7 @@ pub struct PresetSpec {
 
 impl Preset {
     /// Names accepted in configs.
-    pub const NAMES: [&'static str; 5] = ["t1", "t2", "t3", "t4", "reference"];
+    pub const NAMES: [&'static str; 6] = ["t1", "t2", "t3", "t4", "reference", "stereo"];
 
     /// The config name.
     pub fn name(self) -> &'static str {
@@ -65,6 +67,7 @@ impl Preset {
             Preset::T3 => "t3",
             Preset::T4 => "t4",
             Preset::Reference => "reference",
+            Preset::Stereo => "stereo",
         }
     }
 
@@ -76,6 +79,7 @@ impl Preset {
             Preset::T3,
             Preset::T4,
             Preset::Reference,
+            Preset::Stereo,
         ]
         .into_iter()
         .find(|p| p.name() == s)
@@ -109,7 +113,7 @@ impl Preset {
                 bend_std_m: 1.2e-3,
                 ..base
             },
-            Preset::T2 => PresetSpec {
+            Preset::T2 | Preset::Stereo => PresetSpec {
                 bend_mean_m: 1.7e-3,
                 bend_std_m: 2.4e-3,
                 ..base
@@ -148,14 +152,57 @@ impl Preset {
         }
     }
 
-    /// The camera(s) the preset simulates.
-    pub fn cameras(self) -> Vec<CameraSpec> {
-        vec![CameraSpec {
-            name: "cam0".into(),
-            width: 1936,
-            height: 1216,
-            model: "radial3".into(),
-        }]
+    /// Number of cameras the preset simulates unless the config says otherwise.
+    pub fn default_cameras(self) -> usize {
+        if self == Preset::Stereo {
+            2
+        } else {
+            1
+        }
+    }
+
+    /// The `n` cameras of the simulated rig: cam0, cam1, …
+    pub fn cameras(self, n: usize) -> Vec<CameraSpec> {
+        (0..n)
+            .map(|k| CameraSpec {
+                name: format!("cam{k}"),
+                width: 1936,
+                height: 1216,
+                model: "radial3".into(),
+            })
+            .collect()
+    }
+}
+
+/// Spacing of the simulated rig's cameras along x, metres.
+pub const RIG_BASELINE_M: f64 = 0.3;
+
+/// Camera-k-from-camera-0 of a rig of `n` cameras `RIG_BASELINE_M` apart along x,
+/// each turned 2° further towards camera 0's axis.
+pub fn default_rig(n: usize) -> Vec<Pose> {
+    (0..n)
+        .map(|k| {
+            let toe_in = -(2.0 * k as f64).to_radians();
+            // cam0-from-camk turns camk's axis towards -x.
+            let r_0k = Rotation3::from_euler_angles(0.0, toe_in, 0.0);
+            let centre = Vector3::new(RIG_BASELINE_M * k as f64, 0.0, 0.0);
+            let r = r_0k.inverse();
+            Pose::from_parts(&r, &-(r * centre))
+        })
+        .collect()
+}
+
+/// True intrinsics of camera `k` of a rig: the same lens, slightly different units.
+pub fn rig_intrinsics(k: usize) -> Intrinsics {
+    let base = true_intrinsics();
+    let k = k as f64;
+    Intrinsics {
+        fx: base.fx + 7.0 * k,
+        fy: base.fy + 5.0 * k,
+        cx: base.cx - 4.0 * k,
+        cy: base.cy + 3.0 * k,
+        k1: base.k1 + 0.01 * k,
+        ..base
     }
 }
 
@@ -206,13 +253,18 @@ pub struct Generator {
     pub preset: Preset,
     pub images: usize,
     pub seed: u64,
-    pub intrinsics: Intrinsics,
+    /// True intrinsics per camera.
+    pub intrinsics: Vec<Intrinsics>,
+    /// Camera-k-from-camera-0 per camera (identity first).
+    pub rig: Vec<Pose>,
     /// Scales the per-image bend (0 gives a rigid board).
     pub bend_scale: f64,
     /// Scales the static print error (0 gives a perfect print).
     pub print_scale: f64,
     /// Minimum fraction of the corners that must fall in the image for a view.
     pub min_visible: f64,
+    /// The same for the cameras other than the one the board is held up to.
+    pub min_visible_other: f64,
     /// Detector noise per pixel coordinate.
     pub noise_px: f64,
 }
@@ -221,21 +273,30 @@ impl Generator {
     /// The preset's defaults.
     pub fn new(preset: Preset, images: Option<usize>, seed: u64) -> Self {
         let spec = preset.spec();
+        let n = preset.default_cameras();
         Generator {
             spec,
             preset,
             images: images.unwrap_or(spec.images),
             seed,
-            intrinsics: true_intrinsics(),
+            intrinsics: (0..n).map(rig_intrinsics).collect(),
+            rig: default_rig(n),
             bend_scale: 1.0,
             print_scale: 1.0,
             min_visible: 0.8,
+            min_visible_other: 0.3,
             noise_px: spec.noise_px,
         }
     }
 
-    fn random_pose(&self, rng: &mut ChaCha8Rng, camera: &CameraSpec) -> Pose {
-        let k = &self.intrinsics;
+    /// The same with `n` cameras on the default rig.
+    pub fn with_cameras(mut self, n: usize) -> Self {
+        self.intrinsics = (0..n).map(rig_intrinsics).collect();
+        self.rig = default_rig(n);
+        self
+    }
+
+    fn random_pose(&self, rng: &mut ChaCha8Rng, camera: &CameraSpec, k: &Intrinsics) -> Pose {
         let [dmin, dmax] = self.spec.distance_m;
         let d = rng.gen_range(dmin..dmax);
         let (w, h) = (camera.width as f64, camera.height as f64);
@@ -279,7 +340,7 @@ impl Generator {
         let mut rng = ChaCha8Rng::seed_from_u64(self.seed);
         let s = &self.spec;
         let target = s.target;
-        let cameras = self.preset.cameras();
+        let cameras = self.preset.cameras(self.rig.len());
         let print = self.print_scale;
         let nxy = Normal::new(0.0, s.print_sigma_xy_m).expect("sigma is non-negative");
         let nz = Normal::new(0.0, s.print_sigma_z_m).expect("sigma is non-negative");
@@ -299,44 +360,60 @@ impl Generator {
             })
             .collect();
         let noise = Normal::new(0.0, self.noise_px).expect("noise is a non-negative number");
+        let n = self.rig.len();
         let mut truth = Truth {
             preset: self.preset.name().into(),
             seed: self.seed,
             noise_px: self.noise_px,
             target,
-            intrinsics: vec![self.intrinsics; cameras.len()],
-            camera_poses: vec![Pose::identity(); cameras.len()],
+            intrinsics: self.intrinsics.clone(),
+            camera_poses: self.rig.clone(),
             frame_poses: Vec::with_capacity(self.images),
             deformations: Vec::with_capacity(self.images),
             corrections,
         };
         let mut rows = Vec::new();
-        let cam = &cameras[0];
-        let (w, h) = (cam.width as f64, cam.height as f64);
+        let corners = target.num_corners() as f64;
         while truth.frame_poses.len() < self.images {
-            let pose = self.random_pose(&mut rng, cam);
+            // The camera the board is held up to; a lone camera draws nothing here.
+            let anchor = if n > 1 { rng.gen_range(0..n) } else { 0 };
+            let held = self.random_pose(&mut rng, &cameras[anchor], &self.intrinsics[anchor]);
+            let pose = if anchor == 0 {
+                held
+            } else {
+                self.rig[anchor].inverse().compose(&held)
+            };
             let bend = self.random_bend(&mut rng);
             truth.deformations.push(bend);
             truth.frame_poses.push(pose);
             let j = truth.frame_poses.len() - 1;
-            let mut view = Vec::new();
-            for i in 0..target.num_corners() {
-                let xc = pose.transform(&truth.board_point(i, j));
-                let Some(uv) = self.intrinsics.project(&xc) else {
-                    continue;
-                };
-                if uv.x >= 0.0 && uv.x <= w - 1.0 && uv.y >= 0.0 && uv.y <= h - 1.0 {
-                    view.push((i, uv));
-                }
-            }
-            if (view.len() as f64) < self.min_visible * target.num_corners() as f64 {
+            let views: Vec<Vec<(usize, Vector2<f64>)>> = (0..n)
+                .map(|k| {
+                    let (w, h) = (cameras[k].width as f64, cameras[k].height as f64);
+                    let camera_pose = self.rig[k].compose(&pose);
+                    (0..target.num_corners())
+                        .filter_map(|i| {
+                            let uv = self.intrinsics[k]
+                                .project(&camera_pose.transform(&truth.board_point(i, j)))?;
+                            (uv.x >= 0.0 && uv.x <= w - 1.0 && uv.y >= 0.0 && uv.y <= h - 1.0)
+                                .then_some((i, uv))
+                        })
+                        .collect()
+                })
+                .collect();
+            if (views[anchor].len() as f64) < self.min_visible * corners {
                 truth.frame_poses.pop();
                 truth.deformations.pop();
                 continue;
             }
-            for (i, uv) in view {
-                let noisy = uv + Vector2::new(noise.sample(&mut rng), noise.sample(&mut rng));
-                rows.push((0usize, j as i64, i, [noisy.x, noisy.y]));
+            for (k, view) in views.into_iter().enumerate() {
+                if k != anchor && (view.len() as f64) < self.min_visible_other * corners {
+                    continue;
+                }
+                for (i, uv) in view {
+                    let noisy = uv + Vector2::new(noise.sample(&mut rng), noise.sample(&mut rng));
+                    rows.push((k, j as i64, i, [noisy.x, noisy.y]));
+                }
             }
         }
         (Dataset::from_keyed(target, cameras, rows), truth)

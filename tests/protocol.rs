@@ -54,7 +54,10 @@ fn same_seed_same_results_across_threads_and_shards() {
     let s = setup("t2", 80, 3, &[Method::Standard, Method::Full]);
     let one = run_on(&s, 1, None);
     let two = run_on(&s, 2, None);
-    assert_eq!(protocol_csv(&one).unwrap(), protocol_csv(&two).unwrap());
+    assert_eq!(
+        protocol_csv(&s.header, &one).unwrap(),
+        protocol_csv(&s.header, &two).unwrap()
+    );
     let shards: Vec<ShardFile> = (0..2)
         .map(|i| {
             let shard = Shard { index: i, count: 2 };
@@ -68,7 +71,10 @@ fn same_seed_same_results_across_threads_and_shards() {
     assert!(shards.iter().all(|f| !f.rows.is_empty()));
     let (header, merged) = merge(shards.clone()).unwrap();
     assert_eq!(header, s.header);
-    assert_eq!(protocol_csv(&merged).unwrap(), protocol_csv(&one).unwrap());
+    assert_eq!(
+        protocol_csv(&s.header, &merged).unwrap(),
+        protocol_csv(&s.header, &one).unwrap()
+    );
     // Incomplete or overlapping shard sets are refused.
     assert!(merge(vec![shards[0].clone()]).is_err());
     assert!(merge(vec![
