@@ -36,7 +36,8 @@ struct Concat<std::integer_sequence<int, A...>, std::integer_sequence<int, B...>
 template <class Board, bool kRig>
 class ReprojectionError {
  public:
-  ReprojectionError(double u, double v, const double* x) : u_(u), v_(v), x_{x[0], x[1], x[2]} {}
+  ReprojectionError(double u, double v, double w, const double* x)
+      : u_(u), v_(v), w_(w), x_{x[0], x[1], x[2]} {}
 
   template <typename T>
   bool operator()(const T* const p0, const T* const p1, T* r) const {
@@ -61,8 +62,10 @@ class ReprojectionError {
     return Evaluate(p, r);
   }
 
-  static ceres::CostFunction* Create(double u, double v, const double* x) {
-    return Make(new ReprojectionError(u, v, x), BlockSizes{});
+  // w scales the residual: 1 for a full-resolution detection, 0.5^level for a
+  // corner found on a decimated image.
+  static ceres::CostFunction* Create(double u, double v, double w, const double* x) {
+    return Make(new ReprojectionError(u, v, w, x), BlockSizes{});
   }
 
  private:
@@ -92,12 +95,12 @@ class ReprojectionError {
     }
     T uv[2];
     ProjectRadial3(p[0], xc, uv);
-    r[0] = T(u_) - uv[0];
-    r[1] = T(v_) - uv[1];
+    r[0] = w_ * (T(u_) - uv[0]);
+    r[1] = w_ * (T(v_) - uv[1]);
     return true;
   }
 
-  double u_, v_;
+  double u_, v_, w_;
   double x_[3];
 };
 
@@ -112,9 +115,10 @@ class ViewPoseError {
     if (rig) std::copy(rig, rig + kPoseSize, rig_);
   }
 
-  void Add(double u, double v, const double* board_point) {
+  void Add(double u, double v, double w, const double* board_point) {
     uv_.push_back(u);
     uv_.push_back(v);
+    w_.push_back(w);
     points_.insert(points_.end(), board_point, board_point + 3);
   }
   int NumResiduals() const { return static_cast<int>(uv_.size()); }
@@ -140,8 +144,8 @@ class ViewPoseError {
       }
       T uv[2];
       ProjectRadial3(intrinsics, xc, uv);
-      r[2 * k] = T(uv_[2 * k]) - uv[0];
-      r[2 * k + 1] = T(uv_[2 * k + 1]) - uv[1];
+      r[2 * k] = w_[k] * (T(uv_[2 * k]) - uv[0]);
+      r[2 * k + 1] = w_[k] * (T(uv_[2 * k + 1]) - uv[1]);
     }
     return true;
   }
@@ -155,7 +159,7 @@ class ViewPoseError {
   bool has_rig_;
   double intrinsics_[kIntrinsicsSize];
   double rig_[kPoseSize] = {};
-  std::vector<double> uv_, points_;
+  std::vector<double> uv_, w_, points_;
 };
 
 // A view of one parameter table inside Params' storage.
@@ -253,6 +257,14 @@ void Validate(const ffi::ProblemData& d, const ffi::SolveOptions& o) {
   RequireSize(d.deformations, kParaboloidSize * d.num_frames, "deformations");
   RequireSize(d.corrections, kCorrectionStride * d.num_corners, "corrections");
   RequireFinite(d.obs_uv, "obs_uv");
+  if (!d.obs_weight.empty()) {
+    RequireSize(d.obs_weight, n, "obs_weight");
+    for (size_t i = 0; i < n; ++i) {
+      if (!(d.obs_weight[i] > 0.0 && std::isfinite(d.obs_weight[i]))) {
+        Fail("obs_weight[" + std::to_string(i) + "] must be a positive number");
+      }
+    }
+  }
   RequireFinite(d.board, "board");
   RequireFinite(d.intrinsics, "intrinsics");
   RequireFinite(d.camera_poses, "camera_poses");
@@ -342,6 +354,7 @@ void AddResiduals(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params&
     }
     const double* x = &d.board[3 * corner];
     const double u = d.obs_uv[2 * i], v = d.obs_uv[2 * i + 1];
+    const double w = d.obs_weight.empty() ? 1.0 : d.obs_weight[i];
     if (pose_only) {
       double point[3];
       Board::Point(x, blocks.data() + (cam > 0 ? 3 : 2), point);
@@ -350,17 +363,17 @@ void AddResiduals(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params&
       if (loss == nullptr) {
         auto& view = views[{cam, frame}];
         if (view.first == nullptr) view.first = new ViewPoseError(blocks[0], rig);
-        view.first->Add(u, v, point);
+        view.first->Add(u, v, w, point);
         view.second.push_back(static_cast<uint32_t>(i));
       } else {
         auto* f = new ViewPoseError(blocks[0], rig);
-        f->Add(u, v, point);
+        f->Add(u, v, w, point);
         a.residuals.push_back(a.problem->AddResidualBlock(ViewPoseError::Create(f), loss, pose));
         a.block_observations.push_back({static_cast<uint32_t>(i)});
       }
     } else {
-      ceres::CostFunction* cost = cam > 0 ? ReprojectionError<Board, true>::Create(u, v, x)
-                                          : ReprojectionError<Board, false>::Create(u, v, x);
+      ceres::CostFunction* cost = cam > 0 ? ReprojectionError<Board, true>::Create(u, v, w, x)
+                                          : ReprojectionError<Board, false>::Create(u, v, w, x);
       a.residuals.push_back(a.problem->AddResidualBlock(cost, loss, blocks));
       a.block_observations.push_back({static_cast<uint32_t>(i)});
     }

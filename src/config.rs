@@ -4,6 +4,7 @@ use crate::error::{Error, Result};
 use crate::synthetic::Preset;
 use crate::target::Target;
 use serde::Deserialize;
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 /// A camera of the rig as the config describes it.
@@ -71,6 +72,9 @@ impl Default for CalibrationConfig {
 #[serde(deny_unknown_fields)]
 struct RawData {
     observations: Option<PathBuf>,
+    corners_vnl: Option<PathBuf>,
+    #[serde(default)]
+    camera_patterns: BTreeMap<String, String>,
     synthetic: Option<String>,
     images: Option<usize>,
     seed: Option<u64>,
@@ -136,6 +140,11 @@ struct RawConfig {
 pub enum DataSource {
     /// An observations CSV (path resolved against the config's folder).
     Observations(PathBuf),
+    /// mrgingham's / mrcal's corners table, with file-name patterns per camera.
+    CornersVnl {
+        path: PathBuf,
+        patterns: BTreeMap<String, String>,
+    },
     /// A built-in synthetic preset.
     Synthetic {
         preset: Preset,
@@ -288,14 +297,34 @@ impl Checker<'_> {
     }
 
     fn check(&self, raw: RawConfig) -> Result<Config> {
-        let data = self.source(
-            "data",
-            raw.data.observations,
-            raw.data.synthetic,
-            raw.data.images,
-            raw.data.seed,
-            raw.data.cameras,
-        )?;
+        let data = match raw.data.corners_vnl {
+            Some(vnl) => {
+                if raw.data.observations.is_some() || raw.data.synthetic.is_some() {
+                    return Err(self.err(
+                        "[data] takes one of `observations`, `corners_vnl` and `synthetic`".into(),
+                    ));
+                }
+                DataSource::CornersVnl {
+                    path: self.base.join(vnl),
+                    patterns: raw.data.camera_patterns.clone(),
+                }
+            }
+            None => {
+                if !raw.data.camera_patterns.is_empty() {
+                    return Err(
+                        self.err("data.camera_patterns applies to `corners_vnl` only".into())
+                    );
+                }
+                self.source(
+                    "data",
+                    raw.data.observations,
+                    raw.data.synthetic,
+                    raw.data.images,
+                    raw.data.seed,
+                    raw.data.cameras,
+                )?
+            }
+        };
         let (target, cameras) = match &data {
             DataSource::Synthetic {
                 preset, cameras: n, ..
@@ -331,7 +360,7 @@ impl Checker<'_> {
                 };
                 (spec.target, cameras)
             }
-            DataSource::Observations(_) => {
+            DataSource::Observations(_) | DataSource::CornersVnl { .. } => {
                 let t = raw
                     .target
                     .ok_or_else(|| self.err("missing table [target]".into()))?;
@@ -378,7 +407,7 @@ impl Checker<'_> {
                 )?;
                 let default_target = match &source {
                     DataSource::Synthetic { preset, .. } => preset.spec().target,
-                    DataSource::Observations(_) => target,
+                    _ => target,
                 };
                 let t = Target {
                     rows: r.rows.unwrap_or(default_target.rows),
@@ -438,6 +467,24 @@ impl Checker<'_> {
             }
             if p.methods.is_empty() {
                 return Err(self.err("protocol.methods must name at least one method".into()));
+            }
+        }
+        if let DataSource::CornersVnl { patterns, .. } = &data {
+            if let Some(unknown) = patterns
+                .keys()
+                .find(|k| !cameras.iter().any(|c| &c.name == *k))
+            {
+                return Err(self.err(format!(
+                    "data.camera_patterns names `{unknown}`, which is not a camera of [[cameras]]"
+                )));
+            }
+            if cameras.len() > 1 {
+                if let Some(c) = cameras.iter().find(|c| !patterns.contains_key(&c.name)) {
+                    return Err(self.err(format!(
+                        "data.camera_patterns needs a pattern for camera `{}`",
+                        c.name
+                    )));
+                }
             }
         }
         let output_dir = match raw.output {

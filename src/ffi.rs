@@ -32,6 +32,8 @@ pub mod bridge {
         obs_corner: Vec<u32>,
         /// Observed pixels, 2 per observation.
         obs_uv: Vec<f64>,
+        /// Residual weight per observation (empty: all 1).
+        obs_weight: Vec<f64>,
         /// fx fy cx cy k1 k2 k3 per camera.
         intrinsics: Vec<f64>,
         /// Camera-k-from-camera-0 (angle-axis, translation) per camera; camera 0 unused.
@@ -79,7 +81,7 @@ pub mod bridge {
         seconds: f64,
     }
 
-    /// Residuals (loss not applied) and, if asked, the CRS Jacobian over the free parameters.
+    /// Residuals, weighted (loss not applied) and, if asked, the CRS Jacobian over the free parameters.
     #[derive(Debug, Clone, Default)]
     struct Evaluation {
         cost: f64,

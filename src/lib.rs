@@ -8,6 +8,7 @@ pub mod config;
 pub mod deformation;
 pub mod error;
 pub mod ffi;
+pub mod interchange;
 pub mod metrics;
 pub mod observations;
 pub mod output;
@@ -40,6 +41,10 @@ pub fn load_source(
     match source {
         DataSource::Observations(path) => {
             Ok((Dataset::read_csv(path, target, cameras.to_vec())?, None))
+        }
+        DataSource::CornersVnl { path, patterns } => {
+            let (d, _) = interchange::read_corners_vnl(path, target, cameras.to_vec(), patterns)?;
+            Ok((d, None))
         }
         DataSource::Synthetic {
             preset,

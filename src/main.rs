@@ -25,12 +25,36 @@ enum Command {
     Calibrate(CalibrateArgs),
     /// Write a built-in synthetic dataset as observations.csv plus truth.json.
     Generate(GenerateArgs),
+    /// Convert a config's data (corners.vnl, synthetic) to an observations CSV.
+    Import(ImportArgs),
+    /// Write opencv.yaml and <camera>.cameramodel files from a calibration.json.
+    Export(ExportArgs),
     /// Run the evaluation protocol: every subset × method, with metrics and a report.
     Protocol(ProtocolArgs),
     /// Combine the shard files of a sharded protocol run into its outputs.
     Merge(MergeArgs),
     /// Run the protocol of several configs and write one combined report.
     Batch(BatchArgs),
+}
+
+#[derive(Args, Debug)]
+struct ImportArgs {
+    /// The TOML config whose [data] to read.
+    #[arg(long, short)]
+    config: PathBuf,
+    /// The observations CSV to write.
+    #[arg(long)]
+    out: PathBuf,
+}
+
+#[derive(Args, Debug)]
+struct ExportArgs {
+    /// A calibration.json written by deformcal.
+    #[arg(long)]
+    calibration: PathBuf,
+    /// Folder for opencv.yaml and the .cameramodel files.
+    #[arg(long)]
+    output: PathBuf,
 }
 
 #[derive(Args, Debug)]
@@ -164,6 +188,37 @@ fn run_generate(args: GenerateArgs) -> Result<()> {
         dataset.observations.len(),
         preset.name(),
         args.out.display()
+    );
+    Ok(())
+}
+
+fn run_import(args: ImportArgs) -> Result<()> {
+    let config = Config::load(&args.config)?;
+    let (dataset, _) = deformcal::load_source(&config.data, config.target, &config.cameras)?;
+    dataset.write_csv(&args.out)?;
+    println!(
+        "wrote {} observations of {} frames to {}",
+        dataset.observations.len(),
+        dataset.num_frames(),
+        args.out.display()
+    );
+    Ok(())
+}
+
+fn run_export(args: ExportArgs) -> Result<()> {
+    let text = std::fs::read_to_string(&args.calibration)
+        .with_context(|| format!("{}", args.calibration.display()))?;
+    let json: output::CalibrationJson = serde_json::from_str(&text).with_context(|| {
+        format!(
+            "{}: not a deformcal calibration.json",
+            args.calibration.display()
+        )
+    })?;
+    output::write_models(&args.output, &json)?;
+    println!(
+        "wrote calibration.json, opencv.yaml and {} camera model(s) to {}",
+        json.cameras.len(),
+        args.output.display()
     );
     Ok(())
 }
@@ -350,6 +405,8 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Some(Command::Calibrate(a)) => run_calibrate(a),
         Some(Command::Generate(a)) => run_generate(a),
+        Some(Command::Import(a)) => run_import(a),
+        Some(Command::Export(a)) => run_export(a),
         Some(Command::Protocol(a)) => run_protocol(a),
         Some(Command::Merge(a)) => run_merge(a),
         Some(Command::Batch(a)) => run_batch(a),

@@ -6,13 +6,15 @@ use crate::target::Target;
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::path::Path;
 
-/// One detected corner: camera index, dense frame index, corner index, pixel.
+/// One detected corner: camera index, dense frame index, corner index, pixel, and
+/// the weight of its residual (1, or 0.5^level for a corner found on a decimated image).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Observation {
     pub camera: usize,
     pub frame: usize,
     pub corner: usize,
     pub uv: [f64; 2],
+    pub weight: f64,
 }
 
 /// Everything a calibration sees: board, cameras, frames and observations.
@@ -87,6 +89,7 @@ impl Dataset {
                 frame: index[&f],
                 corner,
                 uv,
+                weight: 1.0,
             })
             .collect();
         Dataset {

@@ -17,6 +17,14 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(|e| Error::io(dir, e))?;
     tmp.write_all(bytes).map_err(|e| Error::io(path, e))?;
     tmp.as_file().sync_all().map_err(|e| Error::io(path, e))?;
+    // Temporary files are private; results are ordinary files.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let _ = tmp
+            .as_file()
+            .set_permissions(std::fs::Permissions::from_mode(0o644));
+    }
     tmp.persist(path).map_err(|e| Error::io(path, e.error))?;
     Ok(())
 }
@@ -160,12 +168,28 @@ impl From<&Calibration> for CalibrationJson {
     }
 }
 
-/// Writes `calibration.json` into `dir` (created if needed).
+/// Writes `calibration.json`, `opencv.yaml` and one `<camera>.cameramodel` per
+/// camera into `dir` (created if needed); returns the JSON's path.
 pub fn write_calibration(dir: &Path, c: &Calibration) -> Result<std::path::PathBuf> {
+    write_models(dir, &CalibrationJson::from(c))
+}
+
+/// Writes a calibration's JSON and its OpenCV and mrcal exports into `dir`.
+pub fn write_models(dir: &Path, json: &CalibrationJson) -> Result<std::path::PathBuf> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    let text = serde_json::to_string_pretty(json).expect("calibration serialises");
+    write_atomic(
+        &dir.join("opencv.yaml"),
+        crate::interchange::opencv_yaml(json).as_bytes(),
+    )?;
+    for cam in &json.cameras {
+        let model = crate::interchange::mrcal_cameramodel(cam);
+        write_atomic(
+            &dir.join(crate::interchange::model_file_name(&cam.name)),
+            model.as_bytes(),
+        )?;
+    }
     let path = dir.join("calibration.json");
-    let json =
-        serde_json::to_string_pretty(&CalibrationJson::from(c)).expect("calibration serialises");
-    write_atomic(&path, json.as_bytes())?;
+    write_atomic(&path, text.as_bytes())?;
     Ok(path)
 }

@@ -241,6 +241,7 @@ impl Problem<'_> {
             obs_frame: Vec::with_capacity(n),
             obs_corner: Vec::with_capacity(n),
             obs_uv: Vec::with_capacity(2 * n),
+            obs_weight: Vec::new(),
             intrinsics: state.intrinsics.iter().flat_map(|k| k.to_array()).collect(),
             camera_poses: state
                 .camera_poses
@@ -270,6 +271,9 @@ impl Problem<'_> {
             data.obs_frame.push(o.frame as u32);
             data.obs_corner.push(o.corner as u32);
             data.obs_uv.extend_from_slice(&o.uv);
+        }
+        if d.observations.iter().any(|o| o.weight != 1.0) {
+            data.obs_weight = d.observations.iter().map(|o| o.weight).collect();
         }
         Ok(data)
     }
@@ -311,7 +315,8 @@ impl Problem<'_> {
         Ok(report)
     }
 
-    /// Residuals (observed − projected, per observation u then v) and optionally the Jacobian.
+    /// Residuals in pixels (observed − projected, per observation u then v, weights
+    /// undone) and optionally the Jacobian of the weighted residuals.
     pub fn evaluate(
         &self,
         state: &State,
@@ -319,8 +324,13 @@ impl Problem<'_> {
         with_jacobian: bool,
     ) -> Result<Evaluation> {
         let data = self.data(state)?;
-        bridge::evaluate(&data, &settings.options(), with_jacobian)
-            .map_err(|e| Error::Solver(e.what().to_string()))
+        let mut e = bridge::evaluate(&data, &settings.options(), with_jacobian)
+            .map_err(|e| Error::Solver(e.what().to_string()))?;
+        for (r, o) in e.residuals.chunks_mut(2).zip(&self.dataset.observations) {
+            r[0] /= o.weight;
+            r[1] /= o.weight;
+        }
+        Ok(e)
     }
 }
 

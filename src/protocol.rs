@@ -229,6 +229,7 @@ fn dataset_name(config: &Config) -> String {
     match &config.data {
         crate::config::DataSource::Synthetic { preset, .. } => preset.name().to_string(),
         crate::config::DataSource::Observations(p) => p.display().to_string(),
+        crate::config::DataSource::CornersVnl { path, .. } => path.display().to_string(),
     }
 }
 

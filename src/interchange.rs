@@ -1,0 +1,423 @@
+//! Interchange with the tools around a calibration: mrgingham's / mrcal's
+//! `corners.vnl` in, OpenCV FileStorage YAML and mrcal `.cameramodel` out.
+use crate::camera::Pose;
+use crate::config::CameraSpec;
+use crate::error::{Error, Result};
+use crate::observations::Dataset;
+use crate::output::{CalibrationJson, CameraJson};
+use crate::target::Target;
+use std::collections::{BTreeMap, BTreeSet};
+use std::fmt::Write;
+use std::path::Path;
+
+/// Matches `name` against a glob with `*` and `?`; returns what the wildcards matched.
+pub fn glob_captures(pattern: &str, name: &str) -> Option<String> {
+    fn go(p: &[char], n: &[char], out: &mut String) -> bool {
+        match p.first() {
+            None => n.is_empty(),
+            Some('*') => {
+                for split in (0..=n.len()).rev() {
+                    let len = out.len();
+                    out.extend(&n[..split]);
+                    if go(&p[1..], &n[split..], out) {
+                        return true;
+                    }
+                    out.truncate(len);
+                }
+                false
+            }
+            Some('?') => {
+                if let Some(&c) = n.first() {
+                    out.push(c);
+                    if go(&p[1..], &n[1..], out) {
+                        return true;
+                    }
+                    out.pop();
+                }
+                false
+            }
+            Some(&c) => n.first() == Some(&c) && go(&p[1..], &n[1..], out),
+        }
+    }
+    let (p, n): (Vec<char>, Vec<char>) = (pattern.chars().collect(), name.chars().collect());
+    let mut out = String::new();
+    go(&p, &n, &mut out).then_some(out)
+}
+
+/// The camera and time-step key of an image file: with patterns, the first camera
+/// whose pattern matches (against the base name unless the pattern has a `/`) and
+/// what its wildcards matched; without, camera 0 and the whole name.
+fn camera_of(
+    file: &str,
+    cameras: &[CameraSpec],
+    patterns: &BTreeMap<String, String>,
+) -> Option<(usize, String)> {
+    if patterns.is_empty() {
+        return Some((0, file.to_string()));
+    }
+    let base = file.rsplit('/').next().unwrap_or(file);
+    cameras.iter().enumerate().find_map(|(k, c)| {
+        let pattern = patterns.get(&c.name)?;
+        let subject = if pattern.contains('/') { file } else { base };
+        glob_captures(pattern, subject).map(|key| (k, key))
+    })
+}
+
+/// One parsed corner row.
+struct Corner {
+    line: u64,
+    xy: Option<[f64; 2]>,
+    weight: f64,
+}
+
+/// Reads a `corners.vnl` (SPEC §5): one row per corner, `filename x y [level|weight]`,
+/// `-` for a corner not found, a single `filename - - -` row for an image without a
+/// board, corners in row-major order. Frames are numbered in sorted order of their
+/// time-step keys; returns the dataset and how many images had no board.
+pub fn read_corners_vnl(
+    path: &Path,
+    target: Target,
+    cameras: Vec<CameraSpec>,
+    patterns: &BTreeMap<String, String>,
+) -> Result<(Dataset, usize)> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let err = |line: u64, message: String| Error::Data {
+        path: path.into(),
+        line,
+        message,
+    };
+    if bytes.contains(&0) {
+        return Err(err(
+            1,
+            "this is a binary file, not a corners.vnl table".into(),
+        ));
+    }
+    let text = String::from_utf8(bytes).map_err(|_| err(1, "not a UTF-8 text file".into()))?;
+    if cameras.len() > 1 {
+        for c in &cameras {
+            if !patterns.contains_key(&c.name) {
+                return Err(Error::Invalid(format!(
+                    "{}: with several cameras, data.camera_patterns needs a pattern for `{}`",
+                    path.display(),
+                    c.name
+                )));
+            }
+        }
+    }
+    // Column positions from the vnlog legend, else filename x y [level].
+    let (mut fcol, mut xcol, mut ycol, mut level_col, mut weight_col) = (0, 1, 2, Some(3), None);
+    let mut images: Vec<(String, Vec<Corner>)> = Vec::new();
+    let mut seen_data = false;
+    for (i, raw) in text.lines().enumerate() {
+        let line = i as u64 + 1;
+        let trimmed = raw.trim();
+        if trimmed.is_empty() || trimmed.starts_with("##") {
+            continue;
+        }
+        if let Some(legend) = trimmed.strip_prefix('#') {
+            if seen_data {
+                continue;
+            }
+            let names: Vec<&str> = legend.split_whitespace().collect();
+            let find = |n: &str| names.iter().position(|&c| c == n);
+            match (find("filename"), find("x"), find("y")) {
+                (Some(f), Some(x), Some(y)) => {
+                    (fcol, xcol, ycol) = (f, x, y);
+                    level_col = find("level");
+                    weight_col = find("weight");
+                }
+                _ => {
+                    return Err(err(
+                        line,
+                        format!("legend `{trimmed}` lacks filename, x and y columns"),
+                    ))
+                }
+            }
+            continue;
+        }
+        seen_data = true;
+        let fields: Vec<&str> = trimmed.split_whitespace().collect();
+        let needed = fcol.max(xcol).max(ycol) + 1;
+        if fields.len() < needed {
+            return Err(err(
+                line,
+                format!(
+                    "expected at least {needed} columns (filename x y), found {}",
+                    fields.len()
+                ),
+            ));
+        }
+        let number = |s: &str, what: &str| -> Result<Option<f64>> {
+            if s == "-" {
+                return Ok(None);
+            }
+            let v: f64 = s
+                .parse()
+                .map_err(|_| err(line, format!("{what} `{s}` is not a number")))?;
+            if !v.is_finite() {
+                return Err(err(line, format!("{what} is not finite ({v})")));
+            }
+            Ok(Some(v))
+        };
+        let x = number(fields[xcol], "x")?;
+        let y = number(fields[ycol], "y")?;
+        let mut weight = 1.0;
+        let mut present = x.is_some() && y.is_some();
+        if let Some(c) = level_col.filter(|&c| c < fields.len()) {
+            match number(fields[c], "level")? {
+                // mrgingham: noise doubles with each decimation level.
+                Some(l) if l >= 0.0 => weight = 0.5f64.powf(l),
+                Some(l) => return Err(err(line, format!("level {l} is negative"))),
+                None => present = false,
+            }
+        }
+        if let Some(c) = weight_col.filter(|&c| c < fields.len()) {
+            match number(fields[c], "weight")? {
+                Some(w) if w > 0.0 => weight = w,
+                _ => present = false,
+            }
+        }
+        let file = fields[fcol].to_string();
+        let corner = Corner {
+            line,
+            xy: if present {
+                Some([x.unwrap_or(0.0), y.unwrap_or(0.0)])
+            } else {
+                None
+            },
+            weight,
+        };
+        match images.last_mut() {
+            Some((name, corners)) if *name == file => corners.push(corner),
+            _ => {
+                if images.iter().any(|(n, _)| *n == file) {
+                    return Err(err(
+                        line,
+                        format!("the rows of `{file}` are not contiguous"),
+                    ));
+                }
+                images.push((file, vec![corner]));
+            }
+        }
+    }
+    let n = target.num_corners();
+    let mut without_board = 0;
+    let mut keyed: Vec<(usize, String, Vec<Corner>)> = Vec::new();
+    let mut keys_seen = BTreeSet::new();
+    for (file, corners) in images {
+        let first_line = corners[0].line;
+        if corners.len() == 1 && corners[0].xy.is_none() {
+            without_board += 1;
+            continue;
+        }
+        if corners.len() != n {
+            return Err(err(
+                first_line,
+                format!(
+                    "`{file}` has {} corner rows; a {} × {} board has {n}",
+                    corners.len(),
+                    target.rows,
+                    target.cols
+                ),
+            ));
+        }
+        let (camera, key) = camera_of(&file, &cameras, patterns).ok_or_else(|| {
+            err(
+                first_line,
+                format!("`{file}` matches no pattern of data.camera_patterns"),
+            )
+        })?;
+        if !keys_seen.insert((camera, key.clone())) {
+            return Err(err(
+                first_line,
+                format!(
+                    "`{file}` is a second image of camera {} at time step `{key}`",
+                    cameras[camera].name
+                ),
+            ));
+        }
+        keyed.push((camera, key, corners));
+    }
+    let keys: BTreeSet<&String> = keyed.iter().map(|(_, k, _)| k).collect();
+    let frame_of: BTreeMap<&String, i64> = keys
+        .into_iter()
+        .enumerate()
+        .map(|(i, k)| (k, i as i64))
+        .collect();
+    let mut rows = Vec::new();
+    let mut weights = Vec::new();
+    for (camera, key, corners) in &keyed {
+        for (i, c) in corners.iter().enumerate() {
+            if let Some(uv) = c.xy {
+                rows.push((*camera, frame_of[key], i, uv));
+                weights.push(c.weight);
+            }
+        }
+    }
+    if rows.is_empty() {
+        return Err(err(1, "no corner was found in any image".into()));
+    }
+    let mut dataset = Dataset::from_keyed(target, cameras, rows);
+    for (o, w) in dataset.observations.iter_mut().zip(weights) {
+        o.weight = w;
+    }
+    Ok((dataset, without_board))
+}
+
+/// Writes a dataset as a `corners.vnl` with one image per (camera, frame) named
+/// `<camera>-<frame>.png`, missing corners as `- - -` rows.
+pub fn write_corners_vnl(dataset: &Dataset) -> String {
+    let mut s = String::from("# filename x y level\n");
+    let n = dataset.target.num_corners();
+    let mut views: BTreeMap<(usize, usize), Vec<Option<[f64; 2]>>> = BTreeMap::new();
+    for o in &dataset.observations {
+        views
+            .entry((o.camera, o.frame))
+            .or_insert_with(|| vec![None; n])[o.corner] = Some(o.uv);
+    }
+    for ((camera, frame), corners) in views {
+        let name = format!(
+            "{}-{:06}.png",
+            dataset.cameras[camera].name, dataset.frame_ids[frame]
+        );
+        for c in corners {
+            match c {
+                Some([u, v]) => {
+                    let _ = writeln!(s, "{name} {u} {v} 0");
+                }
+                None => {
+                    let _ = writeln!(s, "{name} - - -");
+                }
+            }
+        }
+    }
+    s
+}
+
+fn fmt(v: f64) -> String {
+    format!("{v:?}")
+}
+
+fn matrix(name: &str, rows: usize, cols: usize, data: &[f64]) -> String {
+    let values: Vec<String> = data.iter().map(|&v| fmt(v)).collect();
+    format!(
+        "{name}: !!opencv-matrix\n   rows: {rows}\n   cols: {cols}\n   dt: d\n   data: [ {} ]\n",
+        values.join(", ")
+    )
+}
+
+/// A FileStorage key from a camera name: letters, digits and underscores, starting with a letter.
+fn key_of(name: &str) -> String {
+    let mut k: String = name
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+        .collect();
+    if !k.starts_with(|c: char| c.is_ascii_alphabetic()) {
+        k.insert_str(0, "cam_");
+    }
+    k
+}
+
+fn camera_block(prefix: &str, c: &CameraJson, rmse: f64) -> String {
+    let i = &c.intrinsics;
+    let mut s = String::new();
+    let _ = writeln!(s, "{prefix}image_width: {}", c.width);
+    let _ = writeln!(s, "{prefix}image_height: {}", c.height);
+    s += &matrix(
+        &format!("{prefix}camera_matrix"),
+        3,
+        3,
+        &[i.fx, 0.0, i.cx, 0.0, i.fy, i.cy, 0.0, 0.0, 1.0],
+    );
+    // OpenCV's order: k1 k2 p1 p2 k3.
+    s += &matrix(
+        &format!("{prefix}distortion_coefficients"),
+        5,
+        1,
+        &[i.k1, i.k2, 0.0, 0.0, i.k3],
+    );
+    let _ = writeln!(s, "{prefix}avg_reprojection_error: {}", fmt(rmse));
+    s
+}
+
+/// OpenCV FileStorage YAML (SPEC §5): unprefixed keys for one camera; for several,
+/// keys prefixed `<camera>_`, plus `<camera>_R` and `<camera>_T` (camera from camera 0).
+pub fn opencv_yaml(c: &CalibrationJson) -> String {
+    let mut s = String::from("%YAML:1.0\n---\n");
+    if c.cameras.len() == 1 {
+        s += &camera_block("", &c.cameras[0], c.rmse_px);
+        return s;
+    }
+    let _ = writeln!(s, "camera_count: {}", c.cameras.len());
+    for cam in &c.cameras {
+        let prefix = format!("{}_", key_of(&cam.name));
+        s += &camera_block(&prefix, cam, c.rmse_px);
+        let pose = Pose {
+            rotation: cam.rotation,
+            translation: cam.translation,
+        };
+        let r = pose.rotation_matrix();
+        let m = r.matrix();
+        let rows: Vec<f64> = (0..3)
+            .flat_map(|i| (0..3).map(move |j| m[(i, j)]))
+            .collect();
+        s += &matrix(&format!("{prefix}R"), 3, 3, &rows);
+        s += &matrix(&format!("{prefix}T"), 3, 1, &cam.translation);
+    }
+    s
+}
+
+/// mrcal's `.cameramodel` of one camera: LENSMODEL_OPENCV5 with p1 = p2 = 0 represents
+/// radial3 exactly; extrinsics are rt_cam_ref with camera 0 as the reference.
+pub fn mrcal_cameramodel(c: &CameraJson) -> String {
+    let i = &c.intrinsics;
+    let values = [i.fx, i.fy, i.cx, i.cy, i.k1, i.k2, 0.0, 0.0, i.k3];
+    let intrinsics: Vec<String> = values.iter().map(|&v| fmt(v)).collect();
+    let extrinsics: Vec<String> = c
+        .rotation
+        .iter()
+        .chain(&c.translation)
+        .map(|&v| fmt(v))
+        .collect();
+    format!(
+        "# generated by deformcal\n{{\n    'lensmodel':  'LENSMODEL_OPENCV5',\n    'intrinsics': [ {} ],\n    'extrinsics': [ {} ],\n    'imagersize': [ {}, {} ],\n}}\n",
+        intrinsics.join(", "),
+        extrinsics.join(", "),
+        c.width,
+        c.height
+    )
+}
+
+/// A file name for a camera's model: its name with path separators replaced.
+pub fn model_file_name(camera: &str) -> String {
+    let safe: String = camera
+        .chars()
+        .map(|c| {
+            if c == '/' || c == '\\' || c == '\0' {
+                '_'
+            } else {
+                c
+            }
+        })
+        .collect();
+    format!("{safe}.cameramodel")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn globs_capture_the_time_step() {
+        assert_eq!(
+            glob_captures("left*.png", "left0042.png").as_deref(),
+            Some("0042")
+        );
+        assert_eq!(
+            glob_captures("cam?/*", "cam1/frame7").as_deref(),
+            Some("1frame7")
+        );
+        assert_eq!(glob_captures("right*", "left1.png"), None);
+        assert_eq!(glob_captures("*", "").as_deref(), Some(""));
+    }
+}

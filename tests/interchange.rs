@@ -1,0 +1,304 @@
+//! Interchange: exports read back by the real OpenCV and mrcal, corners.vnl in,
+//! and corners found by the real mrgingham on rendered images.
+mod common;
+use deformcal::interchange::write_corners_vnl;
+use deformcal::output::CalibrationJson;
+use deformcal::synthetic::Generator;
+use deformcal::synthetic::Preset;
+use deformcal::{Intrinsics, Pose};
+use nalgebra::Vector3;
+use std::io::Write;
+use std::path::Path;
+use std::process::{Command, Stdio};
+
+const PYTHON: &str = "/usr/bin/python3";
+
+fn deformcal(args: &[&str]) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_deformcal"))
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).unwrap()
+}
+
+fn read_json(path: &Path) -> CalibrationJson {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+#[test]
+fn opencv_and_mrcal_read_our_models_and_project_like_us() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("c.toml");
+    std::fs::write(&config, "[data]\nsynthetic = \"stereo\"\nimages = 15\n[calibration]\nmethod = \"full\"\n[output]\ndir = \"out\"\n").unwrap();
+    deformcal(&["--config", config.to_str().unwrap()]);
+    let out = dir.path().join("out");
+    let json = read_json(&out.join("calibration.json"));
+    // Points all over the field of view, some far out in the corners.
+    let points: Vec<[f64; 3]> = (0..60)
+        .map(|i| {
+            let a = i as f64 * 0.618_033_988_75 * std::f64::consts::TAU;
+            let r = 0.36 * ((i % 10) as f64 + 0.5) / 10.0;
+            [r * a.cos(), 0.65 * r * a.sin(), 1.0 + (i % 7) as f64]
+        })
+        .collect();
+    let mut child = Command::new(PYTHON)
+        .arg(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/tests/tools/check_exports.py"
+        ))
+        .arg(&out)
+        .args(["cam0", "cam1"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("run /usr/bin/python3 (apt-get install python3-opencv python3-mrcal)");
+    let payload = serde_json::json!({ "points": points }).to_string();
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(payload.as_bytes())
+        .unwrap();
+    let result = child.wait_with_output().unwrap();
+    assert!(
+        result.status.success(),
+        "{}",
+        String::from_utf8_lossy(&result.stderr)
+    );
+    let tools: serde_json::Value = serde_json::from_slice(&result.stdout).unwrap();
+    for (k, cam) in json.cameras.iter().enumerate() {
+        let t = &tools[&cam.name];
+        let ours: Vec<[f64; 2]> = points
+            .iter()
+            .map(|p| {
+                let uv = cam.intrinsics.project(&Vector3::from(*p)).unwrap();
+                [uv.x, uv.y]
+            })
+            .collect();
+        for tool in ["opencv", "mrcal"] {
+            for (i, o) in ours.iter().enumerate() {
+                let (u, v) = (
+                    t[tool][i][0].as_f64().unwrap(),
+                    t[tool][i][1].as_f64().unwrap(),
+                );
+                assert!(
+                    (u - o[0]).abs() < 1e-6 && (v - o[1]).abs() < 1e-6,
+                    "{} {tool} point {i}: ({u}, {v}) vs {o:?}",
+                    cam.name
+                );
+            }
+        }
+        assert_eq!(t["width"].as_f64().unwrap(), cam.width as f64);
+        assert_eq!(t["imagersize"][1].as_u64().unwrap(), cam.height as u64);
+        assert!((t["rms"].as_f64().unwrap() - json.rmse_px).abs() < 1e-12);
+        let rt: Vec<f64> = t["rt_cam_ref"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        let pose = Pose {
+            rotation: cam.rotation,
+            translation: cam.translation,
+        };
+        for (a, b) in rt.iter().zip(pose.to_array()) {
+            assert!((a - b).abs() < 1e-12, "{}: rt_cam_ref {rt:?}", cam.name);
+        }
+        // OpenCV's R, T: x_k = R x_0 + T.
+        let r = pose.rotation_matrix();
+        for i in 0..3 {
+            for j in 0..3 {
+                assert!((t["R"][i][j].as_f64().unwrap() - r[(i, j)]).abs() < 1e-12);
+            }
+            assert!((t["T"][i].as_f64().unwrap() - cam.translation[i]).abs() < 1e-12);
+        }
+        assert!(k < 2);
+    }
+}
+
+#[test]
+fn corners_vnl_with_missing_corners_and_empty_images_calibrates() {
+    let (mut d, truth) = Generator::new(Preset::T2, Some(20), 6)
+        .with_cameras(2)
+        .generate();
+    // Drop every 7th corner as if the detector missed it.
+    d.observations.retain(|o| (o.corner + o.frame) % 7 != 0);
+    let mut vnl = write_corners_vnl(&d);
+    vnl.push_str("cam0-999998.png - - -\ncam1-999999.png - - -\n");
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("corners.vnl"), vnl).unwrap();
+    let config = dir.path().join("c.toml");
+    std::fs::write(
+        &config,
+        "[target]\nrows = 13\ncols = 13\nspacing = 0.07\n\
+         [[cameras]]\nname = \"cam0\"\nwidth = 1936\nheight = 1216\n\
+         [[cameras]]\nname = \"cam1\"\nwidth = 1936\nheight = 1216\n\
+         [data]\ncorners_vnl = \"corners.vnl\"\ncamera_patterns = { cam0 = \"cam0-*.png\", cam1 = \"cam1-*.png\" }\n\
+         [calibration]\nmethod = \"dynamic\"\n[output]\ndir = \"out\"\n",
+    )
+    .unwrap();
+    deformcal(&["--config", config.to_str().unwrap()]);
+    let json = read_json(&dir.path().join("out/calibration.json"));
+    assert_eq!(json.frames.len(), 20);
+    assert_eq!(json.observations, d.observations.len());
+    for (k, cam) in json.cameras.iter().enumerate() {
+        assert!(
+            (cam.intrinsics.fx / truth.intrinsics[k].fx - 1.0).abs() < 2e-3,
+            "{}",
+            cam.intrinsics.fx
+        );
+    }
+    // import writes the same observations as a CSV.
+    let csv = dir.path().join("obs.csv");
+    deformcal(&[
+        "import",
+        "--config",
+        config.to_str().unwrap(),
+        "--out",
+        csv.to_str().unwrap(),
+    ]);
+    let text = std::fs::read_to_string(&csv).unwrap();
+    assert_eq!(text.lines().count(), 1 + d.observations.len());
+}
+
+/// Renders a chessboard of `n × n` inner corners seen through a pinhole camera, with
+/// 3×3 supersampling and a Gaussian blur, as an 8-bit PGM.
+fn render(path: &Path, k: &Intrinsics, pose: &Pose, n: usize, spacing: f64, size: (usize, usize)) {
+    let (w, h) = size;
+    let r = pose.rotation_matrix();
+    let t = pose.translation_vector();
+    // Board plane in camera coordinates: points X with nᵀ(X − t) = 0, n = R e_z.
+    let normal = r * Vector3::z();
+    let half = (n as f64 + 1.0) / 2.0 * spacing; // edge of the outer squares
+    let mut img = vec![0.0f64; w * h];
+    for v in 0..h {
+        for u in 0..w {
+            let mut sum = 0.0;
+            for sv in [-1.0 / 3.0, 0.0, 1.0 / 3.0] {
+                for su in [-1.0 / 3.0, 0.0, 1.0 / 3.0] {
+                    let ray = Vector3::new(
+                        (u as f64 + su - k.cx) / k.fx,
+                        (v as f64 + sv - k.cy) / k.fy,
+                        1.0,
+                    );
+                    let s = normal.dot(&t) / normal.dot(&ray);
+                    let b = r.inverse() * (ray * s - t);
+                    let white = if b.x.abs() > half || b.y.abs() > half {
+                        true // the white margin around the squares
+                    } else {
+                        let (i, j) = (
+                            ((b.x + half) / spacing).floor() as i64,
+                            ((b.y + half) / spacing).floor() as i64,
+                        );
+                        (i + j) % 2 == 1
+                    };
+                    sum += if white { 230.0 } else { 25.0 };
+                }
+            }
+            img[v * w + u] = sum / 9.0;
+        }
+    }
+    // Separable Gaussian blur, σ = 0.8 px.
+    let kernel: Vec<f64> = (-3..=3)
+        .map(|i: i32| (-(i * i) as f64 / (2.0 * 0.64)).exp())
+        .collect();
+    let norm: f64 = kernel.iter().sum();
+    let blur = |src: &[f64], horizontal: bool| -> Vec<f64> {
+        let mut out = vec![0.0; w * h];
+        for v in 0..h {
+            for u in 0..w {
+                let mut acc = 0.0;
+                for (o, kv) in kernel.iter().enumerate() {
+                    let d = o as i64 - 3;
+                    let (uu, vv) = if horizontal {
+                        ((u as i64 + d).clamp(0, w as i64 - 1), v as i64)
+                    } else {
+                        (u as i64, (v as i64 + d).clamp(0, h as i64 - 1))
+                    };
+                    acc += kv * src[vv as usize * w + uu as usize];
+                }
+                out[v * w + u] = acc / norm;
+            }
+        }
+        out
+    };
+    let img = blur(&blur(&img, true), false);
+    let mut bytes = format!("P5\n{w} {h}\n255\n").into_bytes();
+    bytes.extend(img.iter().map(|&p| p.round().clamp(0.0, 255.0) as u8));
+    std::fs::write(path, bytes).unwrap();
+}
+
+#[test]
+fn real_mrgingham_corners_calibrate() {
+    let dir = tempfile::tempdir().unwrap();
+    let k = Intrinsics::pinhole(900.0, 900.0, 511.5, 383.5);
+    let (n, spacing) = (10usize, 0.03);
+    let deg = std::f64::consts::PI / 180.0;
+    for i in 0..12 {
+        let f = i as f64;
+        let tilt_x = ((f * 37.0) % 50.0 - 25.0) * deg;
+        let tilt_y = ((f * 23.0) % 50.0 - 25.0) * deg;
+        let roll = ((f * 11.0) % 20.0 - 10.0) * deg;
+        let r = nalgebra::Rotation3::from_euler_angles(tilt_x, tilt_y, roll);
+        let t = Vector3::new(
+            ((f * 0.31) % 0.2) - 0.1,
+            ((f * 0.17) % 0.14) - 0.07,
+            0.6 + (f * 0.07) % 0.3,
+        );
+        render(
+            &dir.path().join(format!("view{i:02}.pgm")),
+            &k,
+            &Pose::from_parts(&r, &t),
+            n,
+            spacing,
+            (1024, 768),
+        );
+    }
+    let glob = dir.path().join("view*.pgm");
+    let out = Command::new("mrgingham")
+        .args(["--gridn", "10", "--jobs", "2"])
+        .arg(glob.to_str().unwrap())
+        .output()
+        .expect("run mrgingham (apt-get install mrgingham)");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let vnl = String::from_utf8(out.stdout).unwrap();
+    let found = vnl
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.contains(" - "))
+        .count();
+    assert!(
+        found >= 8 * 100,
+        "mrgingham found only {found} corners:\n{vnl}"
+    );
+    std::fs::write(dir.path().join("corners.vnl"), &vnl).unwrap();
+    let config = dir.path().join("c.toml");
+    std::fs::write(
+        &config,
+        "[target]\nrows = 10\ncols = 10\nspacing = 0.03\n[[cameras]]\nname = \"cam0\"\nwidth = 1024\nheight = 768\n\
+         [data]\ncorners_vnl = \"corners.vnl\"\n[calibration]\nmethod = \"standard\"\n[output]\ndir = \"out\"\n",
+    )
+    .unwrap();
+    deformcal(&["--config", config.to_str().unwrap()]);
+    let json = read_json(&dir.path().join("out/calibration.json"));
+    let got = json.cameras[0].intrinsics;
+    // mrgingham on 8-bit renders is good to a few tenths of a pixel.
+    assert!(json.rmse_px < 0.5, "rmse {}", json.rmse_px);
+    assert!(
+        (got.fx / k.fx - 1.0).abs() < 0.005 && (got.fy / k.fy - 1.0).abs() < 0.005,
+        "{got:?}"
+    );
+    assert!(
+        (got.cx - k.cx).abs() < 2.0 && (got.cy - k.cy).abs() < 2.0,
+        "{got:?}"
+    );
+}
