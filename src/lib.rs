@@ -4,6 +4,7 @@
 //! `standard`, `static`, `dynamic`, `full` — over a Ceres core in C++.
 pub mod calibrate;
 pub mod camera;
+pub mod capi;
 pub mod config;
 pub mod deformation;
 pub mod error;

@@ -1,0 +1,83 @@
+/* deformcal: camera calibration with chessboards that bend while carried.
+ *
+ * C interface of libdeformcal (shared: -ldeformcal; static: libdeformcal.a plus
+ * -lceres -lglog -lpthread -ldl -lm -lstdc++).  Usable from C and C++.
+ * Every function returns 0 on success and non-zero on failure, with a message in
+ * `error` (NUL-terminated, cut to error_len bytes).  No function aborts the
+ * process or throws. */
+#ifndef DEFORMCAL_H
+#define DEFORMCAL_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* A board of rows x cols inner corners, spacing metres apart (corner i = row*cols + col). */
+typedef struct DcTarget {
+  uint32_t rows;
+  uint32_t cols;
+  double spacing;
+} DcTarget;
+
+/* A camera of the rig; camera 0 is the reference of the rig poses. */
+typedef struct DcCamera {
+  const char* name;
+  uint32_t width;
+  uint32_t height;
+} DcCamera;
+
+/* One detected corner; u, v in pixels (integer coordinates are pixel centres). */
+typedef struct DcObservation {
+  uint32_t camera;
+  int64_t frame;
+  uint32_t corner;
+  double u;
+  double v;
+} DcObservation;
+
+/* Calibration settings; zero-initialise and set what you need (0 = default). */
+typedef struct DcOptions {
+  const char* method;   /* "standard", "static", "dynamic" or "full"; NULL = "full" */
+  int32_t robust;       /* 1 = Cauchy loss (default), -1 = plain least squares */
+  double loss_scale_px; /* Cauchy scale; 0 = 1 px */
+  int32_t threads;      /* Ceres threads; 0 = 1 */
+  int32_t max_iterations; /* 0 = 100 */
+} DcOptions;
+
+/* Per-camera result: radial3 intrinsics and the pose camera-k-from-camera-0. */
+typedef struct DcCameraResult {
+  double fx, fy, cx, cy, k1, k2, k3;
+  double rotation[3];    /* angle-axis, radians */
+  double translation[3]; /* metres */
+} DcCameraResult;
+
+/* Whole-calibration result. */
+typedef struct DcResult {
+  double rmse_px;
+  int32_t converged;
+  int32_t iterations;
+  uint64_t observations;
+  uint64_t frames;
+  double max_out_of_plane_m;
+} DcResult;
+
+/* Calibrates from in-memory observations.  camera_results must hold num_cameras entries. */
+int deformcal_calibrate(const DcTarget* target, const DcCamera* cameras, size_t num_cameras,
+                        const DcObservation* observations, size_t num_observations,
+                        const DcOptions* options, DcResult* result, DcCameraResult* camera_results,
+                        char* error, size_t error_len);
+
+/* A built-in synthetic dataset ("t1".."t4", "reference") seen by one camera.  Call with
+ * observations = NULL to learn the count, then with room for *count observations. */
+int deformcal_synthetic(const char* preset, uint32_t images, uint64_t seed, DcTarget* target,
+                        uint32_t* width, uint32_t* height, DcObservation* observations,
+                        size_t capacity, size_t* count, char* error, size_t error_len);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* DEFORMCAL_H */

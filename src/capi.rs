@@ -1,0 +1,327 @@
+//! The C interface of libdeformcal (`include/deformcal.h`): calibrate from in-memory
+//! observations without files. Panics and errors become a non-zero return and a message.
+#![allow(unsafe_code)]
+use crate::config::{CameraSpec, Loss};
+use crate::problem::SolverSettings;
+use crate::synthetic::{Generator, Preset};
+use crate::{calibrate, Dataset, Method, Request, Target};
+use std::ffi::{c_char, CStr};
+use std::panic::{catch_unwind, AssertUnwindSafe};
+
+/// `DcTarget`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+pub struct DcTarget {
+    pub rows: u32,
+    pub cols: u32,
+    pub spacing: f64,
+}
+
+/// `DcCamera`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+pub struct DcCamera {
+    pub name: *const c_char,
+    pub width: u32,
+    pub height: u32,
+}
+
+/// `DcObservation`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+pub struct DcObservation {
+    pub camera: u32,
+    pub frame: i64,
+    pub corner: u32,
+    pub u: f64,
+    pub v: f64,
+}
+
+/// `DcOptions`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+pub struct DcOptions {
+    pub method: *const c_char,
+    pub robust: i32,
+    pub loss_scale_px: f64,
+    pub threads: i32,
+    pub max_iterations: i32,
+}
+
+/// `DcCameraResult`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default)]
+pub struct DcCameraResult {
+    pub fx: f64,
+    pub fy: f64,
+    pub cx: f64,
+    pub cy: f64,
+    pub k1: f64,
+    pub k2: f64,
+    pub k3: f64,
+    pub rotation: [f64; 3],
+    pub translation: [f64; 3],
+}
+
+/// `DcResult`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default)]
+pub struct DcResult {
+    pub rmse_px: f64,
+    pub converged: i32,
+    pub iterations: i32,
+    pub observations: u64,
+    pub frames: u64,
+    pub max_out_of_plane_m: f64,
+}
+
+fn write_error(error: *mut c_char, len: usize, message: &str) {
+    if error.is_null() || len == 0 {
+        return;
+    }
+    let bytes = message.as_bytes();
+    let n = bytes.len().min(len - 1);
+    // SAFETY: the caller promises `error` holds `len` bytes.
+    unsafe {
+        std::ptr::copy_nonoverlapping(bytes.as_ptr(), error as *mut u8, n);
+        *error.add(n) = 0;
+    }
+}
+
+/// Runs `f`, turning an error or a panic into a non-zero return and a message.
+fn guarded(error: *mut c_char, len: usize, f: impl FnOnce() -> Result<(), String>) -> i32 {
+    match catch_unwind(AssertUnwindSafe(f)) {
+        Ok(Ok(())) => 0,
+        Ok(Err(m)) => {
+            write_error(error, len, &m);
+            1
+        }
+        Err(_) => {
+            write_error(error, len, "internal error (panic) in deformcal");
+            2
+        }
+    }
+}
+
+/// # Safety
+/// `s` is null or a NUL-terminated string.
+unsafe fn string(s: *const c_char, what: &str) -> Result<String, String> {
+    if s.is_null() {
+        return Err(format!("{what} is NULL"));
+    }
+    CStr::from_ptr(s)
+        .to_str()
+        .map(str::to_string)
+        .map_err(|_| format!("{what} is not UTF-8"))
+}
+
+/// # Safety
+/// `p` is null (only when `n` is 0) or points to `n` values.
+unsafe fn slice<'a, T>(p: *const T, n: usize, what: &str) -> Result<&'a [T], String> {
+    if n == 0 {
+        return Ok(&[]);
+    }
+    if p.is_null() {
+        return Err(format!("{what} is NULL"));
+    }
+    Ok(std::slice::from_raw_parts(p, n))
+}
+
+/// Calibrates from in-memory observations; see `include/deformcal.h`.
+///
+/// # Safety
+/// Pointers follow the header's contract: arrays hold the stated counts, strings are
+/// NUL-terminated, `camera_results` holds `num_cameras` entries, `error` `error_len` bytes.
+#[no_mangle]
+pub unsafe extern "C" fn deformcal_calibrate(
+    target: *const DcTarget,
+    cameras: *const DcCamera,
+    num_cameras: usize,
+    observations: *const DcObservation,
+    num_observations: usize,
+    options: *const DcOptions,
+    result: *mut DcResult,
+    camera_results: *mut DcCameraResult,
+    error: *mut c_char,
+    error_len: usize,
+) -> i32 {
+    guarded(error, error_len, || {
+        let t = target.as_ref().ok_or("target is NULL")?;
+        if t.rows < 2 || t.cols < 2 || !(t.spacing.is_finite() && t.spacing > 0.0) {
+            return Err("target: rows and cols must be at least 2 and spacing positive".into());
+        }
+        let target = Target {
+            rows: t.rows as usize,
+            cols: t.cols as usize,
+            spacing: t.spacing,
+        };
+        let cams = slice(cameras, num_cameras, "cameras")?;
+        if cams.is_empty() {
+            return Err("at least one camera is needed".into());
+        }
+        let specs = cams
+            .iter()
+            .enumerate()
+            .map(|(k, c)| {
+                Ok(CameraSpec {
+                    name: if c.name.is_null() {
+                        format!("cam{k}")
+                    } else {
+                        string(c.name, "camera name")?
+                    },
+                    width: c.width,
+                    height: c.height,
+                    model: "radial3".into(),
+                })
+            })
+            .collect::<Result<Vec<_>, String>>()?;
+        if specs.iter().any(|c| c.width == 0 || c.height == 0) {
+            return Err("camera width and height must be positive".into());
+        }
+        let obs = slice(observations, num_observations, "observations")?;
+        let mut seen = std::collections::HashSet::new();
+        let mut rows = Vec::with_capacity(obs.len());
+        for (i, o) in obs.iter().enumerate() {
+            if o.camera as usize >= specs.len() || o.corner as usize >= target.num_corners() {
+                return Err(format!(
+                    "observation {i}: camera {} or corner {} out of range",
+                    o.camera, o.corner
+                ));
+            }
+            if !(o.u.is_finite() && o.v.is_finite()) {
+                return Err(format!("observation {i}: pixel is not finite"));
+            }
+            if !seen.insert((o.camera, o.frame, o.corner)) {
+                return Err(format!(
+                    "observation {i}: duplicate camera, frame and corner"
+                ));
+            }
+            rows.push((o.camera as usize, o.frame, o.corner as usize, [o.u, o.v]));
+        }
+        if rows.is_empty() {
+            return Err("no observations".into());
+        }
+        let dataset = Dataset::from_keyed(target, specs, rows);
+        let o = options.as_ref();
+        let method = match o.map(|o| o.method).filter(|m| !m.is_null()) {
+            Some(m) => {
+                let name = string(m, "method")?;
+                Method::parse(&name).ok_or(format!("unknown method `{name}`"))?
+            }
+            None => Method::Full,
+        };
+        let mut settings = SolverSettings::default();
+        if let Some(o) = o {
+            if o.robust < 0 {
+                settings.loss = Loss::None;
+            }
+            if o.loss_scale_px > 0.0 {
+                settings.loss_scale_px = o.loss_scale_px;
+            }
+            if o.threads > 0 {
+                settings.threads = o.threads as usize;
+            }
+            if o.max_iterations > 0 {
+                settings.max_iterations = o.max_iterations as u32;
+            }
+        }
+        let c = calibrate(
+            &dataset,
+            &Request {
+                method,
+                settings,
+                gauge: None,
+            },
+        )
+        .map_err(|e| e.to_string())?;
+        let out = result.as_mut().ok_or("result is NULL")?;
+        *out = DcResult {
+            rmse_px: c.rmse_px,
+            converged: c.converged as i32,
+            iterations: c.iterations(),
+            observations: c.dataset.observations.len() as u64,
+            frames: c.dataset.num_frames() as u64,
+            max_out_of_plane_m: c.max_out_of_plane(),
+        };
+        if camera_results.is_null() {
+            return Err("camera_results is NULL".into());
+        }
+        for k in 0..num_cameras {
+            let i = c.state.intrinsics[k];
+            let p = c.state.camera_poses[k];
+            *camera_results.add(k) = DcCameraResult {
+                fx: i.fx,
+                fy: i.fy,
+                cx: i.cx,
+                cy: i.cy,
+                k1: i.k1,
+                k2: i.k2,
+                k3: i.k3,
+                rotation: p.rotation,
+                translation: p.translation,
+            };
+        }
+        Ok(())
+    })
+}
+
+/// Generates a built-in synthetic dataset into caller memory; see `include/deformcal.h`.
+///
+/// # Safety
+/// Out-pointers are valid; `observations` is null or holds `capacity` entries.
+#[no_mangle]
+pub unsafe extern "C" fn deformcal_synthetic(
+    preset: *const c_char,
+    images: u32,
+    seed: u64,
+    target: *mut DcTarget,
+    width: *mut u32,
+    height: *mut u32,
+    observations: *mut DcObservation,
+    capacity: usize,
+    count: *mut usize,
+    error: *mut c_char,
+    error_len: usize,
+) -> i32 {
+    guarded(error, error_len, || {
+        let name = string(preset, "preset")?;
+        let preset = Preset::parse(&name).ok_or(format!("unknown preset `{name}`"))?;
+        let images = (images > 0).then_some(images as usize);
+        let (d, _) = Generator::new(preset, images, seed)
+            .with_cameras(1)
+            .generate();
+        *count.as_mut().ok_or("count is NULL")? = d.observations.len();
+        if let Some(t) = target.as_mut() {
+            *t = DcTarget {
+                rows: d.target.rows as u32,
+                cols: d.target.cols as u32,
+                spacing: d.target.spacing,
+            };
+        }
+        if let Some(w) = width.as_mut() {
+            *w = d.cameras[0].width;
+        }
+        if let Some(h) = height.as_mut() {
+            *h = d.cameras[0].height;
+        }
+        if observations.is_null() {
+            return Ok(());
+        }
+        if capacity < d.observations.len() {
+            return Err(format!(
+                "room for {capacity} observations, {} needed",
+                d.observations.len()
+            ));
+        }
+        for (i, o) in d.observations.iter().enumerate() {
+            *observations.add(i) = DcObservation {
+                camera: o.camera as u32,
+                frame: d.frame_ids[o.frame],
+                corner: o.corner as u32,
+                u: o.uv[0],
+                v: o.uv[1],
+            };
+        }
+        Ok(())
+    })
+}
