@@ -196,7 +196,13 @@ impl Config {
     /// Parses config text; `path` names the file in messages and anchors relative paths.
     pub fn parse(text: &str, path: &Path) -> Result<Config> {
         let raw: RawConfig = toml::from_str(text).map_err(|e| {
-            let message = e.message().trim().to_string();
+            let message = e
+                .message()
+                .trim()
+                .lines()
+                .map(str::trim)
+                .collect::<Vec<_>>()
+                .join("; ");
             let message = match e.span() {
                 Some(span) => format!("line {}: {}", line_of(text, span.start), message),
                 None => message,
@@ -207,20 +213,82 @@ impl Config {
             }
         })?;
         let base = path.parent().unwrap_or(Path::new("")).to_path_buf();
-        Checker { path, base }.check(raw)
+        Checker { path, base, text }.check(raw)
     }
 }
 
 struct Checker<'a> {
     path: &'a Path,
     base: PathBuf,
+    text: &'a str,
+}
+
+/// The line of `key` in table `table` (the `index`-th of an array of tables), or of
+/// the table's header when `key` is empty.
+fn key_line(text: &str, table: &str, index: usize, key: &str) -> Option<usize> {
+    let mut current: Option<(String, usize)> = None;
+    let mut seen: BTreeMap<String, usize> = BTreeMap::new();
+    for (n, line) in text.lines().enumerate() {
+        let t = line.trim();
+        let header = t
+            .strip_prefix("[[")
+            .and_then(|r| r.split("]]").next())
+            .or_else(|| t.strip_prefix('[').and_then(|r| r.split(']').next()));
+        if let Some(h) = header {
+            let h = h.trim().to_string();
+            let count = seen.entry(h.clone()).or_insert(0);
+            current = Some((h.clone(), *count));
+            *count += 1;
+            if key.is_empty() && h == table && current.as_ref().map(|c| c.1) == Some(index) {
+                return Some(n + 1);
+            }
+            continue;
+        }
+        if let Some((h, i)) = &current {
+            if h == table && *i == index && !key.is_empty() {
+                if let Some(rest) = t.strip_prefix(key) {
+                    if rest.trim_start().starts_with('=') {
+                        return Some(n + 1);
+                    }
+                }
+            }
+        }
+    }
+    None
+}
+
+/// Splits a message that starts with `table.key`, `table[i].key` or `[table]`.
+fn message_key(message: &str) -> Option<(String, usize, String)> {
+    if let Some(rest) = message.strip_prefix('[') {
+        let table = rest.split(']').next()?.trim_start_matches('[');
+        return Some((table.to_string(), 0, String::new()));
+    }
+    let head: String = message
+        .chars()
+        .take_while(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '.' | '[' | ']'))
+        .collect();
+    let (table, key) = head.split_once('.')?;
+    let key: String = key
+        .chars()
+        .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+        .collect();
+    let (table, index) = match table.split_once('[') {
+        Some((t, i)) => (t, i.trim_end_matches(']').parse().ok()?),
+        None => (table, 0),
+    };
+    Some((table.to_string(), index, key))
 }
 
 impl Checker<'_> {
+    /// A config error; when the message starts with a key, its line is named too.
     fn err(&self, message: String) -> Error {
+        let line = message_key(&message).and_then(|(t, i, k)| key_line(self.text, &t, i, &k));
         Error::Config {
             path: self.path.into(),
-            message,
+            message: match line {
+                Some(n) => format!("line {n}: {message}"),
+                None => message,
+            },
         }
     }
 
@@ -381,8 +449,9 @@ impl Checker<'_> {
                 return Err(self.err(format!("cameras[{k}].name `{}` is used twice", c.name)));
             }
             if c.width == 0 || c.height == 0 {
+                let key = if c.width == 0 { "width" } else { "height" };
                 return Err(self.err(format!(
-                    "cameras[{k}] ({}): width and height must be positive",
+                    "cameras[{k}].{key} of `{}` must be positive",
                     c.name
                 )));
             }
@@ -536,7 +605,14 @@ mod tests {
         let e = parse("[target]\nrows=0\ncols=4\nspacing=0.1\n[[cameras]]\nname=\"c\"\nwidth=10\nheight=10\n[data]\nobservations=\"o.csv\"\n")
             .unwrap_err()
             .to_string();
-        assert!(e.contains("target.rows"), "{e}");
+        assert!(e.contains("target.rows") && e.contains("line 2"), "{e}");
+        let e = parse("[target]\nrows=3\ncols=4\nspacing=0.1\n[[cameras]]\nname=\"a\"\nwidth=10\nheight=10\n[[cameras]]\nname=\"b\"\nwidth=0\nheight=10\n[data]\nobservations=\"o.csv\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("cameras[1].width") && e.contains("line 11"),
+            "{e}"
+        );
         let e = parse("[data]\nsynthetic=\"t9\"\n").unwrap_err().to_string();
         assert!(e.contains("data.synthetic") && e.contains("t9"), "{e}");
     }

@@ -81,6 +81,17 @@ pub fn read_corners_vnl(
     patterns: &BTreeMap<String, String>,
 ) -> Result<(Dataset, usize)> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    parse_corners_vnl(&bytes, path, target, cameras, patterns)
+}
+
+/// Parses `corners.vnl` bytes; `path` names the source in messages.
+pub fn parse_corners_vnl(
+    bytes: &[u8],
+    path: &Path,
+    target: Target,
+    cameras: Vec<CameraSpec>,
+    patterns: &BTreeMap<String, String>,
+) -> Result<(Dataset, usize)> {
     let err = |line: u64, message: String| Error::Data {
         path: path.into(),
         line,
@@ -92,7 +103,7 @@ pub fn read_corners_vnl(
             "this is a binary file, not a corners.vnl table".into(),
         ));
     }
-    let text = String::from_utf8(bytes).map_err(|_| err(1, "not a UTF-8 text file".into()))?;
+    let text = std::str::from_utf8(bytes).map_err(|_| err(1, "not a UTF-8 text file".into()))?;
     if cameras.len() > 1 {
         for c in &cameras {
             if !patterns.contains_key(&c.name) {

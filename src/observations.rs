@@ -103,6 +103,16 @@ impl Dataset {
     /// Reads an observations CSV; every problem is reported with its line.
     pub fn read_csv(path: &Path, target: Target, cameras: Vec<CameraSpec>) -> Result<Dataset> {
         let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        Dataset::parse_csv(&bytes, path, target, cameras)
+    }
+
+    /// Parses observations CSV bytes; `path` names the source in messages.
+    pub fn parse_csv(
+        bytes: &[u8],
+        path: &Path,
+        target: Target,
+        cameras: Vec<CameraSpec>,
+    ) -> Result<Dataset> {
         let err = |line: u64, message: String| Error::Data {
             path: path.into(),
             line,
@@ -124,7 +134,7 @@ impl Dataset {
             .has_headers(true)
             .flexible(true)
             .trim(csv::Trim::All)
-            .from_reader(bytes.as_slice());
+            .from_reader(bytes);
         let header = reader
             .headers()
             .map_err(|e| err(1, format!("unreadable header: {e}")))?;
