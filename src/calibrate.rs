@@ -74,12 +74,64 @@ pub struct Calibration {
     pub frozen: Vec<usize>,
     pub warnings: Vec<String>,
     pub seconds: f64,
+    /// The solver settings used (for the loss behind [`Calibration::suspects`]).
+    pub settings: SolverSettings,
+}
+
+/// An observation the robust loss down-weighted, or (without a loss) one far off.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Suspect {
+    pub camera: String,
+    pub frame: i64,
+    pub corner: usize,
+    pub u: f64,
+    pub v: f64,
+    pub residual_px: f64,
+    /// The weight the loss gave it (1 without a loss).
+    pub weight: f64,
 }
 
 impl Calibration {
     /// Total iterations over all solver stages.
     pub fn iterations(&self) -> i32 {
         self.stages.iter().map(|s| s.iterations).sum()
+    }
+
+    /// Observations the Cauchy loss weighted below one half (residual above its
+    /// scale), or without a loss those beyond three times the RMSE; worst first.
+    pub fn suspects(&self) -> Vec<Suspect> {
+        let cauchy = self.settings.loss == crate::config::Loss::Cauchy;
+        let a = self.settings.loss_scale_px;
+        let mut out: Vec<Suspect> = self
+            .dataset
+            .observations
+            .iter()
+            .zip(self.residuals.chunks(2))
+            .filter_map(|(o, r)| {
+                let e = (r[0] * r[0] + r[1] * r[1]).sqrt();
+                let weight = if cauchy {
+                    1.0 / (1.0 + (e * o.weight / a).powi(2))
+                } else {
+                    1.0
+                };
+                let suspect = if cauchy {
+                    weight < 0.5
+                } else {
+                    e > 3.0 * self.rmse_px
+                };
+                suspect.then(|| Suspect {
+                    camera: self.dataset.cameras[o.camera].name.clone(),
+                    frame: self.dataset.frame_ids[o.frame],
+                    corner: o.corner,
+                    u: o.uv[0],
+                    v: o.uv[1],
+                    residual_px: e,
+                    weight,
+                })
+            })
+            .collect();
+        out.sort_by(|a, b| b.residual_px.total_cmp(&a.residual_px));
+        out
     }
 
     /// Largest per-image out-of-plane deformation.
@@ -177,6 +229,59 @@ fn usable_views(
     (kept.subset(&frames), hs)
 }
 
+/// Views whose board normals scatter less than this (RMS angle to their mean)
+/// cannot determine a focal length (Zhang's degenerate case); detector noise alone
+/// scatters the normals of parallel boards by about a degree.
+const MIN_ORIENTATION_SPREAD_DEG: f64 = 3.0;
+
+/// Refuses a camera whose views all show the board at the same orientation (for
+/// instance all parallel to the image plane): the focal length is then unobservable.
+fn check_orientations<'a>(camera: &str, poses: impl Iterator<Item = &'a Pose>) -> Result<()> {
+    let normals: Vec<nalgebra::Vector3<f64>> = poses
+        .map(|p| p.rotation_matrix() * nalgebra::Vector3::z())
+        .collect();
+    let mean = normals.iter().sum::<nalgebra::Vector3<f64>>().normalize();
+    let spread = (normals
+        .iter()
+        .map(|n| n.angle(&mean).to_degrees().powi(2))
+        .sum::<f64>()
+        / normals.len() as f64)
+        .sqrt();
+    if spread < MIN_ORIENTATION_SPREAD_DEG {
+        let tilt = mean.angle(&nalgebra::Vector3::z()).to_degrees();
+        return Err(Error::Degenerate(format!(
+            "all {} views of {camera} show the board at nearly the same orientation (RMS spread {spread:.2}°, {tilt:.1}° from fronto-parallel): \
+             the focal length cannot be determined; tilt the board in different directions",
+            normals.len()
+        )));
+    }
+    Ok(())
+}
+
+/// Fraction of a 10 × 10 grid over the image that observations touch, below which
+/// the distortion is mostly extrapolated.
+const MIN_COVERAGE: f64 = 0.25;
+
+/// Warns about cameras whose observations cover little of the image.
+fn coverage_warnings(dataset: &Dataset, warnings: &mut Vec<String>) {
+    for (k, cam) in dataset.cameras.iter().enumerate() {
+        let mut cells = [[false; 10]; 10];
+        for o in dataset.observations.iter().filter(|o| o.camera == k) {
+            let i = ((o.uv[0] / cam.width as f64) * 10.0).clamp(0.0, 9.0) as usize;
+            let j = ((o.uv[1] / cam.height as f64) * 10.0).clamp(0.0, 9.0) as usize;
+            cells[j][i] = true;
+        }
+        let covered = cells.iter().flatten().filter(|&&c| c).count() as f64 / 100.0;
+        if covered < MIN_COVERAGE {
+            warnings.push(format!(
+                "the observations of {} cover only {:.0}% of the image: the lens distortion away from them is extrapolated; show the board in all parts of the image",
+                cam.name,
+                covered * 100.0
+            ));
+        }
+    }
+}
+
 /// Zhang's initialisation: intrinsics per camera, π_k from the views cameras share,
 /// and one board pose per frame.
 fn initialise(dataset: &Dataset, warnings: &mut Vec<String>) -> Result<(Dataset, State, bool)> {
@@ -207,14 +312,30 @@ fn initialise(dataset: &Dataset, warnings: &mut Vec<String>) -> Result<(Dataset,
             }));
         }
         let list: Vec<Matrix3<f64>> = own.iter().map(|(_, h)| *h).collect();
-        let (kk, fallback) =
-            zhang::initial_intrinsics(&list, cam.width, cam.height).map_err(|e| {
-                if cameras == 1 {
+        let (kk, fallback) = match zhang::initial_intrinsics(&list, cam.width, cam.height) {
+            Ok(k) => k,
+            Err(e) => {
+                // Explain the usual cause: seen through a nominal lens, every view has
+                // the same orientation.
+                let size = cam.width.max(cam.height) as f64;
+                let nominal = Intrinsics::pinhole(
+                    size,
+                    size,
+                    cam.width as f64 / 2.0,
+                    cam.height as f64 / 2.0,
+                );
+                let poses: Vec<Pose> = list
+                    .iter()
+                    .filter_map(|h| zhang::pose_from_homography(h, &nominal))
+                    .collect();
+                check_orientations(&cam.name, poses.iter())?;
+                return Err(if cameras == 1 {
                     e
                 } else {
                     Error::Init(format!("camera {}: {e}", cam.name))
-                }
-            })?;
+                });
+            }
+        };
         if fallback {
             any_fallback = true;
             warnings.push(format!(
@@ -230,6 +351,7 @@ fn initialise(dataset: &Dataset, warnings: &mut Vec<String>) -> Result<(Dataset,
                 ))
             })?);
         }
+        check_orientations(&cam.name, views[k].iter().flatten())?;
         intrinsics.push(kk);
     }
     let names: Vec<String> = dataset.cameras.iter().map(|c| c.name.clone()).collect();
@@ -257,6 +379,7 @@ pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {
     let start = Instant::now();
     let mut warnings = Vec::new();
     let (dataset, mut state, init_fallback) = initialise(dataset, &mut warnings)?;
+    coverage_warnings(&dataset, &mut warnings);
     let initial_intrinsics = state.intrinsics.clone();
 
     let mut stages = Vec::new();
@@ -344,5 +467,6 @@ pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {
         frozen,
         warnings,
         seconds: start.elapsed().as_secs_f64(),
+        settings: request.settings.clone(),
     })
 }

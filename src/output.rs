@@ -171,7 +171,33 @@ impl From<&Calibration> for CalibrationJson {
 /// Writes `calibration.json`, `opencv.yaml` and one `<camera>.cameramodel` per
 /// camera into `dir` (created if needed); returns the JSON's path.
 pub fn write_calibration(dir: &Path, c: &Calibration) -> Result<std::path::PathBuf> {
-    write_models(dir, &CalibrationJson::from(c))
+    let path = write_models(dir, &CalibrationJson::from(c))?;
+    write_atomic(&dir.join("outliers.csv"), &suspects_csv(c)?)?;
+    Ok(path)
+}
+
+/// `outliers.csv`: the observations the robust loss down-weighted, worst first, so
+/// bad detections can be inspected.
+pub fn suspects_csv(c: &Calibration) -> Result<Vec<u8>> {
+    let mut w = csv::Writer::from_writer(Vec::new());
+    for s in c.suspects() {
+        w.serialize(&s)
+            .map_err(|e| Error::Invalid(format!("outliers.csv: {e}")))?;
+    }
+    if c.suspects().is_empty() {
+        w.write_record([
+            "camera",
+            "frame",
+            "corner",
+            "u",
+            "v",
+            "residual_px",
+            "weight",
+        ])
+        .map_err(|e| Error::Invalid(format!("outliers.csv: {e}")))?;
+    }
+    w.into_inner()
+        .map_err(|e| Error::Invalid(format!("outliers.csv: {e}")))
 }
 
 /// Writes a calibration's JSON and its OpenCV and mrcal exports into `dir`.

@@ -267,6 +267,10 @@ pub struct Generator {
     pub min_visible_other: f64,
     /// Detector noise per pixel coordinate.
     pub noise_px: f64,
+    /// Largest tilt of the board about its x and y axes, degrees.
+    pub max_tilt_deg: f64,
+    /// Where the board's centre is aimed: u0, u1, v0, v1 as fractions of the image.
+    pub region: [f64; 4],
 }
 
 impl Generator {
@@ -286,6 +290,8 @@ impl Generator {
             min_visible: 0.8,
             min_visible_other: 0.3,
             noise_px: spec.noise_px,
+            max_tilt_deg: 40.0,
+            region: [0.15, 0.85, 0.15, 0.85],
         }
     }
 
@@ -300,13 +306,23 @@ impl Generator {
         let [dmin, dmax] = self.spec.distance_m;
         let d = rng.gen_range(dmin..dmax);
         let (w, h) = (camera.width as f64, camera.height as f64);
-        let u = rng.gen_range(0.15 * w..0.85 * w);
-        let v = rng.gen_range(0.15 * h..0.85 * h);
+        let [u0, u1, v0, v1] = self.region;
+        let u = rng.gen_range(u0 * w..u1 * w);
+        let v = rng.gen_range(v0 * h..v1 * h);
         let ray = Vector3::new((u - k.cx) / k.fx, (v - k.cy) / k.fy, 1.0).normalize();
         let centre = ray * d;
         let deg = std::f64::consts::PI / 180.0;
-        let tilt_x = rng.gen_range(-40.0..40.0) * deg;
-        let tilt_y = rng.gen_range(-40.0..40.0) * deg;
+        let m = self.max_tilt_deg;
+        let mut tilt = || {
+            if m > 0.0 {
+                rng.gen_range(-m..m) * deg
+            } else {
+                // Keep the random stream the same as with a tilt.
+                let _: f64 = rng.gen();
+                0.0
+            }
+        };
+        let (tilt_x, tilt_y) = (tilt(), tilt());
         let roll = rng.gen_range(-20.0..20.0) * deg;
         let r = Rotation3::from_euler_angles(tilt_x, tilt_y, roll);
         Pose::from_parts(&r, &centre)

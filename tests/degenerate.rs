@@ -1,0 +1,155 @@
+//! Degenerate data is detected and explained, never turned into a silent result;
+//! outliers are held off by the Cauchy loss and reported.
+mod common;
+use common::*;
+use deformcal::config::Loss;
+use deformcal::metrics::mapping_error_rot;
+use deformcal::output::CalibrationJson;
+use deformcal::problem::SolverSettings;
+use deformcal::synthetic::{Generator, Preset};
+use deformcal::{calibrate, Method, Request};
+
+fn request(method: Method) -> Request {
+    Request {
+        method,
+        settings: SolverSettings::default(),
+        gauge: None,
+    }
+}
+
+#[test]
+fn fronto_parallel_views_are_refused_with_the_reason() {
+    let mut g = Generator::new(Preset::T2, Some(20), 3);
+    g.max_tilt_deg = 0.0;
+    let (d, _) = g.generate();
+    let e = calibrate(&d, &request(Method::Standard))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("same orientation") && e.contains("tilt the board"),
+        "{e}"
+    );
+    // The same images with tilted boards calibrate.
+    let (d, _) = Generator::new(Preset::T2, Some(20), 3).generate();
+    assert!(calibrate(&d, &request(Method::Standard)).is_ok());
+}
+
+#[test]
+fn collinear_and_sparse_views_are_skipped_with_a_warning() {
+    let (mut d, t) = data(Preset::T2, 20, 8, 0.0, 0.0);
+    let (f_line, f_sparse) = (2usize, 5usize);
+    // Frame 2 keeps one row of corners (collinear); frame 5 keeps three corners.
+    d.observations.retain(|o| {
+        (o.frame != f_line || o.corner / 13 == 6)
+            && (o.frame != f_sparse || [0, 14, 28].contains(&o.corner))
+    });
+    let c = calibrate(&d, &request(Method::Full)).unwrap();
+    let w = c.warnings.join("\n");
+    assert!(
+        w.contains("frame 2 skipped: its corners are collinear"),
+        "{w}"
+    );
+    assert!(w.contains("frame 5 skipped: 3 corner(s)"), "{w}");
+    assert_eq!(c.dataset.num_frames(), 18);
+    assert!((c.state.intrinsics[0].fx - t.intrinsics[0].fx).abs() < 5.0);
+}
+
+#[test]
+fn a_board_seen_in_one_corner_of_the_image_is_flagged() {
+    let mut g = Generator::new(Preset::T4, Some(25), 2);
+    g.region = [0.05, 0.25, 0.05, 0.3];
+    g.spec.distance_m = [3.0, 3.5];
+    let (d, _) = g.generate();
+    let c = calibrate(&d, &request(Method::Standard)).unwrap();
+    assert!(
+        c.warnings.iter().any(|w| w.contains("cover only")),
+        "{:?}",
+        c.warnings
+    );
+    let (d, _) = Generator::new(Preset::T2, Some(25), 2).generate();
+    let c = calibrate(&d, &request(Method::Standard)).unwrap();
+    assert!(
+        !c.warnings.iter().any(|w| w.contains("cover only")),
+        "{:?}",
+        c.warnings
+    );
+}
+
+#[test]
+fn a_solve_that_does_not_converge_says_so() {
+    let (d, _) = data(Preset::T2, 20, 4, 1.0, 1.0);
+    let r = Request {
+        settings: SolverSettings {
+            max_iterations: 1,
+            ..SolverSettings::default()
+        },
+        ..request(Method::Full)
+    };
+    let c = calibrate(&d, &r).unwrap();
+    assert!(!c.converged);
+    assert!(deformcal::report::summary(&c).contains("NOT CONVERGED"));
+    let json = CalibrationJson::from(&c);
+    assert!(!json.converged);
+    assert!(
+        json.warnings.iter().any(|w| w.contains("did not converge")),
+        "{:?}",
+        json.warnings
+    );
+}
+
+#[test]
+fn cauchy_loss_holds_off_outliers_and_reports_them() {
+    let (clean, t) = data(Preset::T2, 40, 12, 0.0, 0.0);
+    let mut dirty = clean.clone();
+    // Displace every 33rd observation (3 %) by 5–10 px.
+    let mut injected = std::collections::HashSet::new();
+    for (i, o) in dirty.observations.iter_mut().enumerate() {
+        if i % 33 == 7 {
+            let a = i as f64 * 2.399;
+            let r = 5.0 + (i % 6) as f64;
+            o.uv[0] += r * a.cos();
+            o.uv[1] += r * a.sin();
+            injected.insert((o.frame, o.corner));
+        }
+    }
+    let cam = &clean.cameras[0];
+    let reference = run(&clean, Method::Standard, Loss::Cauchy);
+    let robust = run(&dirty, Method::Standard, Loss::Cauchy);
+    let plain = run(&dirty, Method::Standard, Loss::None);
+    let k = |c: &deformcal::Calibration| c.state.intrinsics[0];
+    let off = |c: &deformcal::Calibration| {
+        mapping_error_rot(&k(&reference), &k(c), cam.width, cam.height)
+    };
+    assert!(
+        off(&robust) < 0.1,
+        "robust result moved {} px from the clean one",
+        off(&robust)
+    );
+    assert!((k(&robust).fx - k(&reference).fx).abs() < 1.0);
+    assert!(
+        off(&plain) > 2.0 * off(&robust),
+        "least squares {} vs robust {}",
+        off(&plain),
+        off(&robust)
+    );
+    assert!(truth_error(&robust, &t) < truth_error(&plain, &t));
+    let suspects = robust.suspects();
+    let found: std::collections::HashSet<(usize, usize)> = suspects
+        .iter()
+        .map(|s| (s.frame as usize, s.corner))
+        .collect();
+    let hits = injected.iter().filter(|x| found.contains(x)).count();
+    assert!(
+        hits as f64 >= 0.95 * injected.len() as f64,
+        "found {hits} of {}",
+        injected.len()
+    );
+    assert!(
+        suspects.len() as f64 <= 1.1 * injected.len() as f64,
+        "{} suspects",
+        suspects.len()
+    );
+    assert!(suspects
+        .windows(2)
+        .all(|w| w[0].residual_px >= w[1].residual_px));
+}
