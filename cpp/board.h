@@ -1,8 +1,7 @@
 // Board models: where corner i sits on the (possibly deformed) board of image j.
 //
-// Each model is one struct: the sizes of the parameter blocks it adds, whether
-// each block belongs to a corner (static, shared by all images) or to an image
-// (dynamic), the templated board point, and the gauge it must hold fixed.  The
+// Each model is one struct: how many parameters it adds per image and per
+// corner, the templated board point, and the gauge it must hold fixed.  The
 // reprojection functor and the problem assembly are generic over these structs,
 // so a new deformation model is one more struct here and one switch case.
 #pragma once
@@ -11,13 +10,9 @@
 #include <ceres/problem.h>
 
 #include <cstdint>
-#include <utility>
 #include <vector>
 
 namespace deformcal {
-
-// Which table a model's parameter block is drawn from.
-enum class BlockOwner { kCorner, kFrame };
 
 // Size of the per-corner correction table rows; models use a prefix of it.
 constexpr int kCorrectionStride = 3;
@@ -30,14 +25,17 @@ inline T Paraboloid(const double* x, const T* abc) {
   return abc[0] * (x[0] * x[0]) + abc[1] * (x[1] * x[1]) + abc[2] * (x[0] * x[1]);
 }
 
+// A model's per-image parameters (kFrameExtra of them) ride in the same block as
+// the image's pose, so the Schur solver eliminates them together with it; its
+// per-corner correction (kCornerSize values, 0 for none) is a block of its own.
+
 // Rigid, perfectly planar board.
 struct StandardBoard {
-  using Sizes = std::integer_sequence<int>;
-  static constexpr BlockOwner kOwners[1] = {BlockOwner::kCorner};  // unused
-  static constexpr int kNumBlocks = 0;
+  static constexpr int kFrameExtra = 0;
+  static constexpr int kCornerSize = 0;
 
   template <typename T>
-  static void Point(const double* x, const T* const* /*blocks*/, T* out) {
+  static void Point(const double* x, const T* /*frame_extra*/, const T* /*corner*/, T* out) {
     out[0] = T(x[0]);
     out[1] = T(x[1]);
     out[2] = T(x[2]);
@@ -47,15 +45,14 @@ struct StandardBoard {
 
 // One 3D correction per corner for the whole dataset (Strobl & Hirzinger).
 struct StaticBoard {
-  using Sizes = std::integer_sequence<int, 3>;
-  static constexpr BlockOwner kOwners[1] = {BlockOwner::kCorner};
-  static constexpr int kNumBlocks = 1;
+  static constexpr int kFrameExtra = 0;
+  static constexpr int kCornerSize = 3;
 
   template <typename T>
-  static void Point(const double* x, const T* const* blocks, T* out) {
-    out[0] = x[0] + blocks[0][0];
-    out[1] = x[1] + blocks[0][1];
-    out[2] = x[2] + blocks[0][2];
+  static void Point(const double* x, const T* /*frame_extra*/, const T* corner, T* out) {
+    out[0] = x[0] + corner[0];
+    out[1] = x[1] + corner[1];
+    out[2] = x[2] + corner[2];
   }
   // 7 DOF: two corners fully, the z of a third; together they pin the pose and scale.
   static void FixGauge(ceres::Problem& problem, double* corrections,
@@ -69,30 +66,28 @@ struct StaticBoard {
 
 // A paraboloid out-of-plane bend per image (the paper's dynamic model).
 struct DynamicBoard {
-  using Sizes = std::integer_sequence<int, kParaboloidSize>;
-  static constexpr BlockOwner kOwners[1] = {BlockOwner::kFrame};
-  static constexpr int kNumBlocks = 1;
+  static constexpr int kFrameExtra = kParaboloidSize;
+  static constexpr int kCornerSize = 0;
 
   template <typename T>
-  static void Point(const double* x, const T* const* blocks, T* out) {
+  static void Point(const double* x, const T* frame_extra, const T* /*corner*/, T* out) {
     out[0] = T(x[0]);
     out[1] = T(x[1]);
-    out[2] = x[2] + Paraboloid(x, blocks[0]);
+    out[2] = x[2] + Paraboloid(x, frame_extra);
   }
   static void FixGauge(ceres::Problem&, double*, const std::vector<uint32_t>&) {}
 };
 
 // Static in-plane correction per corner plus the per-image paraboloid.
 struct FullBoard {
-  using Sizes = std::integer_sequence<int, 2, kParaboloidSize>;
-  static constexpr BlockOwner kOwners[2] = {BlockOwner::kCorner, BlockOwner::kFrame};
-  static constexpr int kNumBlocks = 2;
+  static constexpr int kFrameExtra = kParaboloidSize;
+  static constexpr int kCornerSize = 2;
 
   template <typename T>
-  static void Point(const double* x, const T* const* blocks, T* out) {
-    out[0] = x[0] + blocks[0][0];
-    out[1] = x[1] + blocks[0][1];
-    out[2] = x[2] + Paraboloid(x, blocks[1]);
+  static void Point(const double* x, const T* frame_extra, const T* corner, T* out) {
+    out[0] = x[0] + corner[0];
+    out[1] = x[1] + corner[1];
+    out[2] = x[2] + Paraboloid(x, frame_extra);
   }
   // 4 DOF: in-plane translation, rotation and scale, pinned by two corners.
   static void FixGauge(ceres::Problem& problem, double* corrections,

@@ -32,7 +32,8 @@ struct Concat<std::integer_sequence<int, A...>, std::integer_sequence<int, B...>
 };
 
 // Residual of one observed corner.  Blocks: intrinsics, [camera-k-from-camera-0
-// if kRig], camera-0-from-board pose, then the board model's own blocks.
+// if kRig], the image's block (camera-0-from-board pose followed by the model's
+// per-image parameters), then the corner's correction if the model has one.
 template <class Board, bool kRig>
 class ReprojectionError {
  public:
@@ -55,12 +56,6 @@ class ReprojectionError {
     const T* const p[] = {p0, p1, p2, p3};
     return Evaluate(p, r);
   }
-  template <typename T>
-  bool operator()(const T* const p0, const T* const p1, const T* const p2, const T* const p3,
-                  const T* const p4, T* r) const {
-    const T* const p[] = {p0, p1, p2, p3, p4};
-    return Evaluate(p, r);
-  }
 
   // w scales the residual: 1 for a full-resolution detection, 0.5^level for a
   // corner found on a decimated image.
@@ -69,11 +64,14 @@ class ReprojectionError {
   }
 
  private:
-  static constexpr int kLeading = kRig ? 3 : 2;
+  static constexpr int kFrame = kRig ? 2 : 1;
+  static constexpr int kFrameSize = kPoseSize + Board::kFrameExtra;
   using LeadingSizes =
-      std::conditional_t<kRig, std::integer_sequence<int, kIntrinsicsSize, kPoseSize, kPoseSize>,
-                         std::integer_sequence<int, kIntrinsicsSize, kPoseSize>>;
-  using BlockSizes = typename Concat<LeadingSizes, typename Board::Sizes>::type;
+      std::conditional_t<kRig, std::integer_sequence<int, kIntrinsicsSize, kPoseSize, kFrameSize>,
+                         std::integer_sequence<int, kIntrinsicsSize, kFrameSize>>;
+  using BlockSizes = std::conditional_t<
+      Board::kCornerSize == 0, LeadingSizes,
+      typename Concat<LeadingSizes, std::integer_sequence<int, Board::kCornerSize>>::type>;
 
   template <int... Ns>
   static ceres::CostFunction* Make(ReprojectionError* f, std::integer_sequence<int, Ns...>) {
@@ -82,10 +80,12 @@ class ReprojectionError {
 
   template <typename T>
   bool Evaluate(const T* const* p, T* r) const {
+    const T* frame = p[kFrame];
+    const T* corner = Board::kCornerSize > 0 ? p[kFrame + 1] : nullptr;
     T board[3];
-    Board::Point(x_, p + kLeading, board);
+    Board::Point(x_, frame + kPoseSize, corner, board);
     T xc[3];
-    TransformPoint(p[kLeading - 1], board, xc);
+    TransformPoint(frame, board, xc);
     if constexpr (kRig) {
       T xk[3];
       TransformPoint(p[1], xc, xk);
@@ -175,33 +175,51 @@ struct Table {
 // Working copies of the parameter tables, in one allocation.  Ceres orders the
 // blocks of an elimination group by address; one buffer in a fixed table order
 // makes that order, and so the floating-point result, the same in every run.
+// Each image's pose and the model's per-image parameters sit side by side.
 struct Params {
   std::vector<double> storage;
-  Table intrinsics, camera_poses, frame_poses, deformations, corrections;
+  Table intrinsics, camera_poses, frames, corrections;
+  int frame_stride;
 
-  explicit Params(const ffi::ProblemData& d) {
-    const rust::Vec<double>* sources[] = {&d.intrinsics, &d.camera_poses, &d.frame_poses,
-                                          &d.deformations, &d.corrections};
-    Table* tables[] = {&intrinsics, &camera_poses, &frame_poses, &deformations, &corrections};
-    size_t total = 0;
-    for (const auto* src : sources) total += src->size();
-    storage.reserve(total);
-    for (const auto* src : sources) storage.insert(storage.end(), src->begin(), src->end());
+  Params(const ffi::ProblemData& d, int frame_extra) : frame_stride(kPoseSize + frame_extra) {
+    const size_t num_frames = d.frame_poses.size() / kPoseSize;
+    storage.reserve(d.intrinsics.size() + d.camera_poses.size() + num_frames * frame_stride +
+                    d.corrections.size());
+    storage.insert(storage.end(), d.intrinsics.begin(), d.intrinsics.end());
+    storage.insert(storage.end(), d.camera_poses.begin(), d.camera_poses.end());
+    for (size_t j = 0; j < num_frames; ++j) {
+      storage.insert(storage.end(), d.frame_poses.begin() + kPoseSize * j,
+                     d.frame_poses.begin() + kPoseSize * (j + 1));
+      for (int e = 0; e < frame_extra; ++e) {
+        const size_t i = kParaboloidSize * j + e;
+        storage.push_back(i < d.deformations.size() ? d.deformations[i] : 0.0);
+      }
+    }
+    storage.insert(storage.end(), d.corrections.begin(), d.corrections.end());
     size_t offset = 0;
-    for (int k = 0; k < 5; ++k) {
-      tables[k]->ptr = storage.data() + offset;
-      tables[k]->n = sources[k]->size();
-      offset += tables[k]->n;
+    for (auto [table, n] : {std::pair{&intrinsics, d.intrinsics.size()},
+                            std::pair{&camera_poses, d.camera_poses.size()},
+                            std::pair{&frames, num_frames * frame_stride},
+                            std::pair{&corrections, d.corrections.size()}}) {
+      table->ptr = storage.data() + offset;
+      table->n = n;
+      offset += n;
     }
   }
   Params(const Params&) = delete;
   Params& operator=(const Params&) = delete;
 
+  double* Frame(size_t j) { return frames.data() + frame_stride * j; }
+
   void CopyTo(ffi::ProblemData& d) {
     std::copy(intrinsics.begin(), intrinsics.end(), d.intrinsics.begin());
     std::copy(camera_poses.begin(), camera_poses.end(), d.camera_poses.begin());
-    std::copy(frame_poses.begin(), frame_poses.end(), d.frame_poses.begin());
-    std::copy(deformations.begin(), deformations.end(), d.deformations.begin());
+    const size_t num_frames = d.frame_poses.size() / kPoseSize;
+    for (size_t j = 0; j < num_frames; ++j) {
+      const double* f = Frame(j);
+      std::copy(f, f + kPoseSize, d.frame_poses.begin() + kPoseSize * j);
+      for (int e = 0; e < frame_stride - kPoseSize; ++e) d.deformations[kParaboloidSize * j + e] = f[kPoseSize + e];
+    }
     std::copy(corrections.begin(), corrections.end(), d.corrections.begin());
   }
 };
@@ -319,7 +337,6 @@ struct Assembled {
   std::vector<std::vector<uint32_t>> block_observations;
   std::vector<double*> frame_pose_blocks;
   std::vector<double*> correction_blocks;  // free (non-constant) corrections
-  int correction_dim = 0;
 };
 
 template <class Board>
@@ -328,13 +345,11 @@ void AddResiduals(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params&
   ceres::LossFunction* loss =
       o.loss == ffi::LossKind::Cauchy ? new ceres::CauchyLoss(o.loss_scale_px) : nullptr;
   const size_t n = d.obs_uv.size() / 2;
-  bool corner_blocks_fixed = d.fix_corrections, frame_blocks_fixed = d.fix_deformations;
-  for (int b = 0; b < Board::kNumBlocks; ++b) {
-    if (Board::kOwners[b] == BlockOwner::kCorner && !d.fix_corrections) corner_blocks_fixed = false;
-    if (Board::kOwners[b] == BlockOwner::kFrame && !d.fix_deformations) frame_blocks_fixed = false;
-  }
+  constexpr bool kHasCorner = Board::kCornerSize > 0;
+  constexpr bool kHasFrameExtra = Board::kFrameExtra > 0;
   const bool pose_only = d.fix_intrinsics && (d.num_cameras == 1 || d.fix_camera_poses) &&
-                         corner_blocks_fixed && frame_blocks_fixed;
+                         (!kHasCorner || d.fix_corrections) &&
+                         (!kHasFrameExtra || d.fix_deformations);
   std::vector<double*> blocks;
   std::vector<bool> corner_used(d.num_corners, false);
   std::vector<bool> frame_used(d.num_frames, false);
@@ -343,37 +358,37 @@ void AddResiduals(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params&
   std::map<std::pair<uint32_t, uint32_t>, std::pair<ViewPoseError*, std::vector<uint32_t>>> views;
   for (size_t i = 0; i < n; ++i) {
     const uint32_t cam = d.obs_camera[i], frame = d.obs_frame[i], corner = d.obs_corner[i];
-    blocks.clear();
-    blocks.push_back(&p.intrinsics[kIntrinsicsSize * cam]);
-    if (cam > 0) blocks.push_back(&p.camera_poses[kPoseSize * cam]);
-    blocks.push_back(&p.frame_poses[kPoseSize * frame]);
-    for (int b = 0; b < Board::kNumBlocks; ++b) {
-      blocks.push_back(Board::kOwners[b] == BlockOwner::kCorner
-                           ? &p.corrections[kCorrectionStride * corner]
-                           : &p.deformations[kParaboloidSize * frame]);
-    }
+    double* intrinsics = &p.intrinsics[kIntrinsicsSize * cam];
+    double* rig = cam > 0 ? &p.camera_poses[kPoseSize * cam] : nullptr;
+    double* frame_block = p.Frame(frame);
+    double* correction = kHasCorner ? &p.corrections[kCorrectionStride * corner] : nullptr;
     const double* x = &d.board[3 * corner];
     const double u = d.obs_uv[2 * i], v = d.obs_uv[2 * i + 1];
     const double w = d.obs_weight.empty() ? 1.0 : d.obs_weight[i];
     if (pose_only) {
       double point[3];
-      Board::Point(x, blocks.data() + (cam > 0 ? 3 : 2), point);
-      const double* rig = cam > 0 ? blocks[1] : nullptr;
-      double* pose = blocks[cam > 0 ? 2 : 1];
+      Board::Point(x, frame_block + kPoseSize, correction, point);
+      // The pose is the first kPoseSize values of the image's block.
       if (loss == nullptr) {
         auto& view = views[{cam, frame}];
-        if (view.first == nullptr) view.first = new ViewPoseError(blocks[0], rig);
+        if (view.first == nullptr) view.first = new ViewPoseError(intrinsics, rig);
         view.first->Add(u, v, w, point);
         view.second.push_back(static_cast<uint32_t>(i));
       } else {
-        auto* f = new ViewPoseError(blocks[0], rig);
+        auto* f = new ViewPoseError(intrinsics, rig);
         f->Add(u, v, w, point);
-        a.residuals.push_back(a.problem->AddResidualBlock(ViewPoseError::Create(f), loss, pose));
+        a.residuals.push_back(
+            a.problem->AddResidualBlock(ViewPoseError::Create(f), loss, frame_block));
         a.block_observations.push_back({static_cast<uint32_t>(i)});
       }
     } else {
-      ceres::CostFunction* cost = cam > 0 ? ReprojectionError<Board, true>::Create(u, v, w, x)
-                                          : ReprojectionError<Board, false>::Create(u, v, w, x);
+      blocks.clear();
+      blocks.push_back(intrinsics);
+      if (rig) blocks.push_back(rig);
+      blocks.push_back(frame_block);
+      if (kHasCorner) blocks.push_back(correction);
+      ceres::CostFunction* cost = rig ? ReprojectionError<Board, true>::Create(u, v, w, x)
+                                      : ReprojectionError<Board, false>::Create(u, v, w, x);
       a.residuals.push_back(a.problem->AddResidualBlock(cost, loss, blocks));
       a.block_observations.push_back({static_cast<uint32_t>(i)});
     }
@@ -381,13 +396,13 @@ void AddResiduals(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params&
     frame_used[frame] = true;
   }
   for (auto& [key, view] : views) {
-    double* pose = &p.frame_poses[kPoseSize * key.second];
-    a.residuals.push_back(a.problem->AddResidualBlock(ViewPoseError::Create(view.first), nullptr, pose));
+    a.residuals.push_back(a.problem->AddResidualBlock(ViewPoseError::Create(view.first), nullptr,
+                                                      p.Frame(key.second)));
     a.block_observations.push_back(std::move(view.second));
   }
   ceres::Problem& problem = *a.problem;
   for (uint32_t f = 0; f < d.num_frames; ++f) {
-    if (frame_used[f]) a.frame_pose_blocks.push_back(&p.frame_poses[kPoseSize * f]);
+    if (frame_used[f]) a.frame_pose_blocks.push_back(p.Frame(f));
   }
   for (size_t k = 0; k < d.num_cameras; ++k) {
     double* intr = &p.intrinsics[kIntrinsicsSize * k];
@@ -397,42 +412,49 @@ void AddResiduals(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params&
       problem.SetParameterBlockConstant(pose);
     }
   }
-  bool has_corner_blocks = false, has_frame_blocks = false;
-  for (int b = 0; b < Board::kNumBlocks; ++b) {
-    (Board::kOwners[b] == BlockOwner::kCorner ? has_corner_blocks : has_frame_blocks) = true;
+  if (kHasFrameExtra && d.fix_deformations && !pose_only) {
+    // Hold the per-image parameters, keep the pose free.
+    std::vector<int> held;
+    for (int e = 0; e < Board::kFrameExtra; ++e) held.push_back(kPoseSize + e);
+    for (double* block : a.frame_pose_blocks) {
+      problem.SetManifold(block, new ceres::SubsetManifold(kPoseSize + Board::kFrameExtra, held));
+    }
   }
-  if (has_frame_blocks && d.fix_deformations) {
-    for (uint32_t f = 0; f < d.num_frames; ++f) {
-      double* block = &p.deformations[kParaboloidSize * f];
+  if (!kHasCorner) return;
+  if (d.fix_corrections) {
+    for (uint32_t c = 0; c < d.num_corners; ++c) {
+      double* block = &p.corrections[kCorrectionStride * c];
       if (problem.HasParameterBlock(block)) problem.SetParameterBlockConstant(block);
     }
+    return;
   }
-  if (has_corner_blocks) {
-    if (d.fix_corrections) {
-      for (uint32_t c = 0; c < d.num_corners; ++c) {
-        double* block = &p.corrections[kCorrectionStride * c];
-        if (problem.HasParameterBlock(block)) problem.SetParameterBlockConstant(block);
-      }
-    } else {
-      for (uint32_t c : d.frozen_corners) {
-        if (corner_used[c]) problem.SetParameterBlockConstant(&p.corrections[kCorrectionStride * c]);
-      }
-      if (o.fix_gauge) {
-        for (uint32_t c : d.gauge_corners) {
-          if (!corner_used[c]) Fail("gauge corner " + std::to_string(c) + " is never observed");
-        }
-        Board::FixGauge(problem, p.corrections.data(), std::vector<uint32_t>(d.gauge_corners.begin(), d.gauge_corners.end()));
-      }
-      for (uint32_t c = 0; c < d.num_corners; ++c) {
-        double* block = &p.corrections[kCorrectionStride * c];
-        if (corner_used[c] && !problem.IsParameterBlockConstant(block)) {
-          a.correction_blocks.push_back(block);
-        }
-      }
-      a.correction_dim = problem.ParameterBlockSize(a.correction_blocks.empty()
-                                                        ? &p.corrections[0]
-                                                        : a.correction_blocks.front());
+  for (uint32_t c : d.frozen_corners) {
+    if (corner_used[c]) problem.SetParameterBlockConstant(&p.corrections[kCorrectionStride * c]);
+  }
+  if (o.fix_gauge) {
+    for (uint32_t c : d.gauge_corners) {
+      if (!corner_used[c]) Fail("gauge corner " + std::to_string(c) + " is never observed");
     }
+    Board::FixGauge(problem, p.corrections.data(),
+                    std::vector<uint32_t>(d.gauge_corners.begin(), d.gauge_corners.end()));
+  }
+  for (uint32_t c = 0; c < d.num_corners; ++c) {
+    double* block = &p.corrections[kCorrectionStride * c];
+    if (corner_used[c] && !problem.IsParameterBlockConstant(block)) {
+      a.correction_blocks.push_back(block);
+    }
+  }
+}
+
+// Per-image parameters the model keeps beside each pose.
+int FrameExtra(ffi::BoardModel model) {
+  switch (model) {
+    case ffi::BoardModel::Dynamic:
+      return DynamicBoard::kFrameExtra;
+    case ffi::BoardModel::Full:
+      return FullBoard::kFrameExtra;
+    default:
+      return 0;
   }
 }
 
@@ -525,7 +547,7 @@ namespace ffi {
 
 SolveReport solve(ProblemData& data, const SolveOptions& options) {
   const auto start = std::chrono::steady_clock::now();
-  Params params(data);
+  Params params(data, FrameExtra(data.model));
   Assembled a = Assemble(data, options, params);
   ceres::Solver::Options s = MakeSolverOptions(options);
   ChooseLinearSolver(a, s);
@@ -546,7 +568,7 @@ SolveReport solve(ProblemData& data, const SolveOptions& options) {
   report.linear_solver = rust::String(ceres::LinearSolverTypeToString(summary.linear_solver_type_used));
   if (report.usable) {
     for (double v : params.intrinsics) report.usable = report.usable && std::isfinite(v);
-    for (double v : params.frame_poses) report.usable = report.usable && std::isfinite(v);
+    for (double v : params.frames) report.usable = report.usable && std::isfinite(v);
     if (!report.usable) report.message = rust::String("the solve produced non-finite parameters");
   }
   if (report.usable) params.CopyTo(data);
@@ -557,7 +579,7 @@ SolveReport solve(ProblemData& data, const SolveOptions& options) {
 }
 
 Evaluation evaluate(const ProblemData& data, const SolveOptions& options, bool with_jacobian) {
-  Params params(data);
+  Params params(data, FrameExtra(data.model));
   Assembled a = Assemble(data, options, params);
   ceres::Problem::EvaluateOptions e;
   e.residual_blocks = a.residuals;
