@@ -66,6 +66,8 @@ pub mod bridge {
         parameter_tolerance: f64,
         fix_gauge: bool,
         verbose: bool,
+        /// Use the single-piece autodiff functor (the reference for the chained Jacobian).
+        reference_jacobian: bool,
     }
 
     /// What Ceres reported about one solve.

@@ -66,6 +66,9 @@ pub struct SolverSettings {
     /// Hold the gauge corners (always, except to demonstrate the rank defect).
     pub fix_gauge: bool,
     pub verbose: bool,
+    /// Differentiate the whole residual in one autodiff piece (slower; the reference
+    /// the default chained Jacobian is tested against).
+    pub reference_jacobian: bool,
 }
 
 impl From<&CalibrationConfig> for SolverSettings {
@@ -80,6 +83,7 @@ impl From<&CalibrationConfig> for SolverSettings {
             parameter_tolerance: c.parameter_tolerance,
             fix_gauge: true,
             verbose: c.verbose,
+            reference_jacobian: false,
         }
     }
 }
@@ -105,6 +109,7 @@ impl SolverSettings {
             parameter_tolerance: self.parameter_tolerance,
             fix_gauge: self.fix_gauge,
             verbose: self.verbose,
+            reference_jacobian: self.reference_jacobian,
         }
     }
 }

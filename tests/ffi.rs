@@ -12,6 +12,7 @@ fn options() -> SolveOptions {
         parameter_tolerance: 1e-8,
         fix_gauge: true,
         verbose: false,
+        reference_jacobian: false,
     }
 }
 
