@@ -63,6 +63,10 @@ fn camera_of(
     })
 }
 
+/// Largest decimation level accepted; mrgingham uses a handful, and beyond this a
+/// corner's weight 0.5^level would vanish.
+const MAX_LEVEL: f64 = 30.0;
+
 /// One parsed corner row.
 struct Corner {
     line: u64,
@@ -177,8 +181,8 @@ pub fn parse_corners_vnl(
         if let Some(c) = level_col.filter(|&c| c < fields.len()) {
             match number(fields[c], "level")? {
                 // mrgingham: noise doubles with each decimation level.
-                Some(l) if l >= 0.0 => weight = 0.5f64.powf(l),
-                Some(l) => return Err(err(line, format!("level {l} is negative"))),
+                Some(l) if (0.0..=MAX_LEVEL).contains(&l) => weight = 0.5f64.powf(l),
+                Some(l) => return Err(err(line, format!("level {l} is outside 0..{MAX_LEVEL}"))),
                 None => present = false,
             }
         }
