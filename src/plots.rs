@@ -34,17 +34,7 @@ fn plot_err<E: std::fmt::Debug>(path: &Path) -> impl Fn(E) -> Error + '_ {
 }
 
 fn mean_std(v: &[f64]) -> Option<(f64, f64)> {
-    if v.is_empty() {
-        return None;
-    }
-    let n = v.len() as f64;
-    let m = v.iter().sum::<f64>() / n;
-    let s = if v.len() > 1 {
-        (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
-    } else {
-        0.0
-    };
-    Some((m, s))
+    crate::protocol_report::Stat::of(v.iter().copied()).map(|s| (s.mean, s.std))
 }
 
 fn value_range(series: &[Series], lines: &[HLine]) -> (f64, f64) {

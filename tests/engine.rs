@@ -2,7 +2,6 @@
 mod common;
 use common::*;
 use deformcal::config::Loss;
-use deformcal::metrics::mapping_error_rot;
 use deformcal::problem::{Hold, Problem, SolverSettings};
 use deformcal::synthetic::Preset;
 use deformcal::{Calibration, Method};
@@ -14,13 +13,7 @@ fn noise_rmse(sigma: f64) -> f64 {
 }
 
 fn rot_error(c: &Calibration, t: &deformcal::synthetic::Truth) -> f64 {
-    let cam = &c.dataset.cameras[0];
-    mapping_error_rot(
-        &t.intrinsics[0],
-        &c.state.intrinsics[0],
-        cam.width,
-        cam.height,
-    )
+    truth_error_rot(c, t, 0)
 }
 
 #[test]
@@ -121,20 +114,7 @@ fn paraboloid_bends_are_recovered_and_bias_standard() {
         );
         // Per-image bend: RMS of Δz over the board, estimated vs true.
         let target = c.dataset.target;
-        let mut errs: Vec<f64> = c
-            .state
-            .deformations
-            .iter()
-            .zip(&t.deformations)
-            .map(|(est, tr)| {
-                let sq: f64 = target
-                    .nominal_points()
-                    .iter()
-                    .map(|p| (est.dz(p.x, p.y) - tr.dz(p.x, p.y)).powi(2))
-                    .sum();
-                (sq / target.num_corners() as f64).sqrt()
-            })
-            .collect();
+        let mut errs = bend_errors(&c, &t);
         errs.sort_by(f64::total_cmp);
         let true_mean = t
             .deformations

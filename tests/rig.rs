@@ -2,7 +2,6 @@
 mod common;
 use common::*;
 use deformcal::config::Loss;
-use deformcal::metrics::mapping_error_rot;
 use deformcal::synthetic::{Generator, Preset, Truth};
 use deformcal::{Calibration, Dataset, Method, Pose};
 use nalgebra::{Rotation3, Vector3};
@@ -17,12 +16,7 @@ fn rig_error(estimated: &Pose, truth: &Pose) -> (f64, f64) {
 
 fn check_cameras(c: &Calibration, t: &Truth, max_deg: f64, max_m: f64) {
     for (k, cam) in c.dataset.cameras.iter().enumerate() {
-        let e = mapping_error_rot(
-            &t.intrinsics[k],
-            &c.state.intrinsics[k],
-            cam.width,
-            cam.height,
-        );
+        let e = truth_error_rot(c, t, k);
         assert!(e < 0.4, "{}: mapping error to truth {e}", cam.name);
         assert!(
             (c.state.intrinsics[k].fx - t.intrinsics[k].fx).abs() < 3.0,
@@ -38,25 +32,6 @@ fn check_cameras(c: &Calibration, t: &Truth, max_deg: f64, max_m: f64) {
             );
         }
     }
-}
-
-/// Per-image RMS of the Δz error over the board.
-fn bend_errors(c: &Calibration, t: &Truth) -> Vec<f64> {
-    let target = c.dataset.target;
-    c.dataset
-        .frame_ids
-        .iter()
-        .zip(&c.state.deformations)
-        .map(|(&f, est)| {
-            let tr = t.deformations[f as usize];
-            let sq: f64 = target
-                .nominal_points()
-                .iter()
-                .map(|p| (est.dz(p.x, p.y) - tr.dz(p.x, p.y)).powi(2))
-                .sum();
-            (sq / target.num_corners() as f64).sqrt()
-        })
-        .collect()
 }
 
 fn median(mut v: Vec<f64>) -> f64 {

@@ -73,3 +73,34 @@ pub fn aligned_rms(est: &[nalgebra::Vector3<f64>], truth: &[nalgebra::Vector3<f6
         / n)
         .sqrt()
 }
+
+/// Mapping error to the truth with the best virtual rotation removed, camera `k`.
+pub fn truth_error_rot(c: &Calibration, truth: &Truth, k: usize) -> f64 {
+    let cam = &c.dataset.cameras[k];
+    deformcal::metrics::mapping_error_rot(
+        &truth.intrinsics[k],
+        &c.state.intrinsics[k],
+        cam.width,
+        cam.height,
+    )
+}
+
+/// Per-image RMS over the board of the error of the estimated bend Δz, in the
+/// calibration's frame order.
+pub fn bend_errors(c: &Calibration, truth: &Truth) -> Vec<f64> {
+    let target = c.dataset.target;
+    c.dataset
+        .frame_ids
+        .iter()
+        .zip(&c.state.deformations)
+        .map(|(&f, est)| {
+            let tr = truth.deformations[f as usize];
+            let sq: f64 = target
+                .nominal_points()
+                .iter()
+                .map(|p| (est.dz(p.x, p.y) - tr.dz(p.x, p.y)).powi(2))
+                .sum();
+            (sq / target.num_corners() as f64).sqrt()
+        })
+        .collect()
+}
