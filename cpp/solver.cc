@@ -702,6 +702,34 @@ ceres::Solver::Options MakeSolverOptions(const ffi::SolveOptions& o) {
   return s;
 }
 
+// Residuals (loss not applied) in observation order; Ceres orders them by block.
+// With `jacobian`, also the Jacobian over the free parameter blocks.
+bool OrderedResiduals(Assembled& a, size_t num_observations, int threads, double* cost,
+                      std::vector<double>* out, ceres::CRSMatrix* jacobian) {
+  ceres::Problem::EvaluateOptions e;
+  e.residual_blocks = a.residuals;
+  e.apply_loss_function = false;
+  e.num_threads = threads;
+  if (jacobian != nullptr) {
+    std::vector<double*> all;
+    a.problem->GetParameterBlocks(&all);
+    for (double* b : all) {
+      if (!a.problem->IsParameterBlockConstant(b)) e.parameter_blocks.push_back(b);
+    }
+  }
+  std::vector<double> by_block;
+  if (!a.problem->Evaluate(e, cost, &by_block, nullptr, jacobian)) return false;
+  out->assign(2 * num_observations, 0.0);
+  size_t next = 0;
+  for (const auto& obs : a.block_observations) {
+    for (uint32_t i : obs) {
+      (*out)[2 * i] = by_block[next++];
+      (*out)[2 * i + 1] = by_block[next++];
+    }
+  }
+  return true;
+}
+
 }  // namespace
 
 namespace ffi {
@@ -732,7 +760,16 @@ SolveReport solve(ProblemData& data, const SolveOptions& options) {
     for (double v : params.frames) report.usable = report.usable && std::isfinite(v);
     if (!report.usable) report.message = rust::String("the solve produced non-finite parameters");
   }
-  if (report.usable) params.CopyTo(data);
+  if (report.usable) {
+    params.CopyTo(data);
+    // The final residuals, from the problem already built.
+    double cost = 0.0;
+    std::vector<double> residuals;
+    if (OrderedResiduals(a, data.obs_uv.size() / 2, options.num_threads, &cost, &residuals,
+                         nullptr)) {
+      for (double r : residuals) report.residuals.push_back(r);
+    }
+  }
   report.seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   if (options.verbose) std::fprintf(stderr, "%s\n", summary.BriefReport().c_str());
@@ -742,32 +779,15 @@ SolveReport solve(ProblemData& data, const SolveOptions& options) {
 Evaluation evaluate(const ProblemData& data, const SolveOptions& options, bool with_jacobian) {
   Params params(data, FrameExtra(data.model));
   Assembled a = Assemble(data, options, params);
-  ceres::Problem::EvaluateOptions e;
-  e.residual_blocks = a.residuals;
-  e.apply_loss_function = false;
-  e.num_threads = options.num_threads;
-  std::vector<double*> all;
-  a.problem->GetParameterBlocks(&all);
-  for (double* b : all) {
-    if (!a.problem->IsParameterBlockConstant(b)) e.parameter_blocks.push_back(b);
-  }
   double cost = 0.0;
-  std::vector<double> residuals;
+  std::vector<double> ordered;
   ceres::CRSMatrix jacobian;
-  if (!a.problem->Evaluate(e, &cost, &residuals, nullptr, with_jacobian ? &jacobian : nullptr)) {
+  if (!OrderedResiduals(a, data.obs_uv.size() / 2, options.num_threads, &cost, &ordered,
+                        with_jacobian ? &jacobian : nullptr)) {
     Fail("the residuals could not be evaluated (a point behind the camera?)");
   }
   Evaluation out;
   out.cost = cost;
-  // Ceres orders residuals by block; hand them back in observation order.
-  std::vector<double> ordered(data.obs_uv.size(), 0.0);
-  size_t next = 0;
-  for (const auto& obs : a.block_observations) {
-    for (uint32_t i : obs) {
-      ordered[2 * i] = residuals[next++];
-      ordered[2 * i + 1] = residuals[next++];
-    }
-  }
   for (double r : ordered) out.residuals.push_back(r);
   if (with_jacobian) {
     out.jacobian_rows = static_cast<size_t>(jacobian.num_rows);

@@ -409,8 +409,8 @@ pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {
     let report = standard.solve(&mut state, &warm)?;
     stages.push(Stage::new(Method::Standard, &report));
 
-    let (gauge, frozen) = if request.method == Method::Standard {
-        (Vec::new(), Vec::new())
+    let (gauge, frozen, residuals) = if request.method == Method::Standard {
+        (Vec::new(), Vec::new(), report.residuals)
     } else {
         let gauge = choose_gauge(&dataset, request.method, request.gauge.as_deref())?;
         let frozen = if request.method.has_correction() {
@@ -433,7 +433,7 @@ pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {
         };
         let report = problem.solve(&mut state, &request.settings)?;
         stages.push(Stage::new(request.method, &report));
-        (gauge, frozen)
+        (gauge, frozen, report.residuals)
     };
     let converged = stages.last().map(|s| s.converged).unwrap_or(false);
     if !converged {
@@ -443,16 +443,6 @@ pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {
             stages.last().map(|s| s.message.as_str()).unwrap_or("")
         ));
     }
-    let final_problem = Problem {
-        dataset: &dataset,
-        method: request.method,
-        gauge: gauge.clone(),
-        frozen: frozen.clone(),
-        hold: Hold::default(),
-    };
-    let residuals = final_problem
-        .evaluate(&state, &request.settings, false)?
-        .residuals;
     Ok(Calibration {
         method: request.method,
         rmse_px: rmse(&residuals),

@@ -81,6 +81,8 @@ pub mod bridge {
         message: String,
         linear_solver: String,
         seconds: f64,
+        /// Final residuals in observation order, weighted, loss not applied (empty if unusable).
+        residuals: Vec<f64>,
     }
 
     /// Residuals, weighted (loss not applied) and, if asked, the CRS Jacobian over the free parameters.

@@ -286,7 +286,7 @@ impl Problem<'_> {
     /// Refines `state` in place; an unusable solve is an error, a non-converged one is reported.
     pub fn solve(&self, state: &mut State, settings: &SolverSettings) -> Result<SolveReport> {
         let mut data = self.data(state)?;
-        let report = bridge::solve(&mut data, &settings.options())
+        let mut report = bridge::solve(&mut data, &settings.options())
             .map_err(|e| Error::Solver(e.what().to_string()))?;
         if !report.usable {
             return Err(Error::Solver(format!(
@@ -294,6 +294,7 @@ impl Problem<'_> {
                 self.method, report.message
             )));
         }
+        self.unweight(&mut report.residuals);
         for (k, chunk) in data.intrinsics.chunks(7).enumerate() {
             state.intrinsics[k] = Intrinsics::from_slice(chunk);
         }
@@ -331,11 +332,16 @@ impl Problem<'_> {
         let data = self.data(state)?;
         let mut e = bridge::evaluate(&data, &settings.options(), with_jacobian)
             .map_err(|e| Error::Solver(e.what().to_string()))?;
-        for (r, o) in e.residuals.chunks_mut(2).zip(&self.dataset.observations) {
+        self.unweight(&mut e.residuals);
+        Ok(e)
+    }
+
+    /// Residuals in pixels from weighted ones.
+    fn unweight(&self, residuals: &mut [f64]) {
+        for (r, o) in residuals.chunks_mut(2).zip(&self.dataset.observations) {
             r[0] /= o.weight;
             r[1] /= o.weight;
         }
-        Ok(e)
     }
 }
 
