@@ -252,3 +252,46 @@ fn cli_shards_merge_into_the_unsharded_outputs() {
         report.contains("Train and test error") && report.contains("![mapping error](mapping.svg)")
     );
 }
+
+#[test]
+fn a_failed_subset_is_recorded_and_the_run_goes_on() {
+    // Ten images, six of them with only three corners: subsets of four images
+    // sometimes keep fewer than the three usable images a calibration needs.
+    let (mut d, _) = deformcal::synthetic::generate(deformcal::synthetic::Preset::T2, Some(10), 4);
+    d.observations.retain(|o| o.frame < 4 || o.corner < 3);
+    let dir = tempfile::tempdir().unwrap();
+    d.write_csv(&dir.path().join("obs.csv")).unwrap();
+    let config = Config::parse(
+        "[target]\nrows = 13\ncols = 13\nspacing = 0.07\n[[cameras]]\nname = \"cam0\"\nwidth = 1936\nheight = 1216\n[data]\nobservations = \"obs.csv\"\n",
+        &dir.path().join("c.toml"),
+    )
+    .unwrap();
+    let protocol = ProtocolConfig {
+        subsets: 12,
+        images_per_subset: 4,
+        seed: 1,
+        methods: vec![Method::Standard],
+    };
+    let s = prepare(&config, &protocol).unwrap();
+    let rows = run_on(&s, 2, None);
+    assert_eq!(rows.len(), 12);
+    let failed: Vec<_> = rows.iter().filter(|r| !r.ok()).collect();
+    assert!(
+        !failed.is_empty() && failed.len() < rows.len(),
+        "{} of {} failed",
+        failed.len(),
+        rows.len()
+    );
+    for r in &failed {
+        assert!(
+            r.error.as_deref().unwrap().contains("usable image"),
+            "{:?}",
+            r.error
+        );
+        assert!(r.cameras.is_empty() && r.rmse_px.is_none());
+    }
+    let sum = summarise(&s.header, &rows);
+    assert_eq!(sum.methods["standard"].failed, failed.len());
+    let csv = String::from_utf8(protocol_csv(&s.header, &rows).unwrap()).unwrap();
+    assert_eq!(csv.matches(",failed,").count(), failed.len());
+}
