@@ -295,3 +295,35 @@ fn a_failed_subset_is_recorded_and_the_run_goes_on() {
     let csv = String::from_utf8(protocol_csv(&s.header, &rows).unwrap()).unwrap();
     assert_eq!(csv.matches(",failed,").count(), failed.len());
 }
+
+/// The shipped batch configs through `deformcal batch`, quick: one combined report.
+#[test]
+fn cli_batch_writes_one_combined_report() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let dir = tempfile::tempdir().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_deformcal"))
+        .arg("batch")
+        .arg(root.join("configs/protocol_t4.toml"))
+        .arg(root.join("configs/protocol_reference.toml"))
+        .args(["--subsets", "2", "--output"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
+    assert!(
+        report.contains("## Dataset `t4`") && report.contains("## Dataset `reference`"),
+        "{report}"
+    );
+    assert!(report.contains("(protocol_t4/rmse.svg)"));
+    for name in ["protocol_t4", "protocol_reference"] {
+        let csv = std::fs::read_to_string(dir.path().join(name).join("protocol.csv")).unwrap();
+        assert_eq!(csv.lines().count(), 1 + 2 * 4, "{name}");
+        assert!(!csv.contains(",failed,"), "{name}: {csv}");
+        assert!(dir.path().join(name).join("mapping.svg").exists());
+    }
+}
