@@ -92,6 +92,17 @@ pub struct Suspect {
 }
 
 impl Calibration {
+    /// The problem this calibration solved: its data, method, gauge and frozen corners.
+    pub fn problem(&self) -> Problem<'_> {
+        Problem {
+            dataset: &self.dataset,
+            method: self.method,
+            gauge: self.gauge.clone(),
+            frozen: self.frozen.clone(),
+            hold: Hold::default(),
+        }
+    }
+
     /// Total iterations over all solver stages.
     pub fn iterations(&self) -> i32 {
         self.stages.iter().map(|s| s.iterations).sum()

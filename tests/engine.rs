@@ -2,7 +2,7 @@
 mod common;
 use common::*;
 use deformcal::config::Loss;
-use deformcal::problem::{Hold, Problem, SolverSettings};
+use deformcal::problem::{Problem, SolverSettings};
 use deformcal::synthetic::Preset;
 use deformcal::{Calibration, Method};
 use nalgebra::{DMatrix, Vector3};
@@ -212,13 +212,7 @@ fn gauge_is_fixed_and_removes_exactly_the_free_directions() {
                 "{m}: gauge corner {g} moved: {corr:?}"
             );
         }
-        let problem = Problem {
-            dataset: &c.dataset,
-            method: m,
-            gauge: c.gauge.clone(),
-            frozen: c.frozen.clone(),
-            hold: Hold::default(),
-        };
+        let problem = c.problem();
         let fixed = normalised_spectrum(&problem, &c, &SolverSettings::default());
         let free = normalised_spectrum(
             &problem,
@@ -255,13 +249,7 @@ fn chained_jacobian_equals_single_piece_autodiff() {
     }
     for m in Method::ALL {
         let c = run(&d, m, Loss::Cauchy);
-        let problem = Problem {
-            dataset: &c.dataset,
-            method: m,
-            gauge: c.gauge.clone(),
-            frozen: c.frozen.clone(),
-            hold: Hold::default(),
-        };
+        let problem = c.problem();
         let chained = problem
             .evaluate(&c.state, &SolverSettings::default(), true)
             .unwrap();

@@ -160,11 +160,8 @@ fn pose_only_refit_evaluates_like_the_general_problem() {
     let r = s.reference.as_ref().unwrap();
     let settings = SolverSettings::default();
     let problem = |hold| Problem {
-        dataset: &r.dataset,
-        method: Method::Static,
-        gauge: r.gauge.clone(),
-        frozen: r.frozen.clone(),
         hold,
+        ..r.problem()
     };
     let held = Hold {
         intrinsics: true,
