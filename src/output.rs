@@ -180,11 +180,13 @@ pub fn write_calibration(dir: &Path, c: &Calibration) -> Result<std::path::PathB
 /// bad detections can be inspected.
 pub fn suspects_csv(c: &Calibration) -> Result<Vec<u8>> {
     let mut w = csv::Writer::from_writer(Vec::new());
-    for s in c.suspects() {
-        w.serialize(&s)
+    let suspects = c.suspects();
+    for s in &suspects {
+        w.serialize(s)
             .map_err(|e| Error::Invalid(format!("outliers.csv: {e}")))?;
     }
-    if c.suspects().is_empty() {
+    // serde writes the header with the first row; an empty report still gets one.
+    if suspects.is_empty() {
         w.write_record([
             "camera",
             "frame",
