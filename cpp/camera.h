@@ -4,6 +4,8 @@
 
 #include <ceres/rotation.h>
 
+#include <cmath>
+
 namespace deformcal {
 
 // Number of intrinsic parameters of the radial3 model: fx, fy, cx, cy, k1, k2, k3.
@@ -32,3 +34,45 @@ inline void ProjectRadial3(const T* intrinsics, const T* xc, T* uv) {
 }
 
 }  // namespace deformcal
+
+// x_out = R x + t for a double pose, with R and dx_out/dω (both row-major 3x3);
+// dx_out/dt is the identity.  Closed form, so the pose's derivatives cost one
+// sincos instead of six-wide Jets: d(R x)/dω = -[R x]_× J_l(ω), with SO(3)'s left
+// Jacobian J_l = I + b [ω]_× + c [ω]_×² and R = I + a [ω]_× + b [ω]_×².
+inline void TransformPointWithJacobian(const double* pose, const double* x, double* x_out,
+                                       double* R, double* d_omega) {
+  const double* w = pose;
+  const double t2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2];
+  double a, b, c;
+  if (t2 < 1e-4) {
+    // Taylor series: the closed forms cancel catastrophically near zero.
+    a = 1.0 - t2 / 6.0 + t2 * t2 / 120.0;
+    b = 0.5 - t2 / 24.0 + t2 * t2 / 720.0;
+    c = 1.0 / 6.0 - t2 / 120.0 + t2 * t2 / 5040.0;
+  } else {
+    const double t = std::sqrt(t2);
+    const double s = std::sin(t), co = std::cos(t);
+    a = s / t;
+    b = (1.0 - co) / t2;
+    c = (t - s) / (t2 * t);
+  }
+  // [ω]_× and [ω]_×² = ω ωᵀ - |ω|² I.
+  const double W[9] = {0, -w[2], w[1], w[2], 0, -w[0], -w[1], w[0], 0};
+  double W2[9];
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) W2[3 * i + j] = w[i] * w[j] - (i == j ? t2 : 0.0);
+  double Jl[9];
+  for (int k = 0; k < 9; ++k) {
+    const double id = (k % 4 == 0) ? 1.0 : 0.0;
+    R[k] = id + a * W[k] + b * W2[k];
+    Jl[k] = id + b * W[k] + c * W2[k];
+  }
+  double y[3];
+  for (int i = 0; i < 3; ++i) y[i] = R[3 * i] * x[0] + R[3 * i + 1] * x[1] + R[3 * i + 2] * x[2];
+  // -[y]_× rows, times J_l.
+  const double Ny[9] = {0, y[2], -y[1], -y[2], 0, y[0], y[1], -y[0], 0};
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j)
+      d_omega[3 * i + j] = Ny[3 * i] * Jl[j] + Ny[3 * i + 1] * Jl[3 + j] + Ny[3 * i + 2] * Jl[6 + j];
+  for (int i = 0; i < 3; ++i) x_out[i] = y[i] + pose[3 + i];
+}

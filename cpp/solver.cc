@@ -104,12 +104,12 @@ class ReprojectionError {
   double x_[3];
 };
 
-// The same residual with its Jacobian assembled by the chain rule from three small
-// autodiff pieces: the board point (Jets over the model's own parameters), the
-// rigid transform (Jets over the pose only; d/dX is the rotation matrix), and
-// the projection (Jets over intrinsics and the camera point).  The pieces carry
-// 3 to 10 derivatives instead of up to 21, which makes the Jacobian about twice
-// as cheap; ReprojectionError stays as the reference it is tested against.
+// The same residual with its Jacobian assembled by the chain rule from three
+// pieces: the board point (Jets over the model's own parameters), the rigid
+// transform (closed form; d/dX is the rotation matrix), and the projection (Jets
+// over intrinsics and the camera point).  The Jets carry 3 to 10 derivatives
+// instead of up to 21, which makes the Jacobian several times cheaper;
+// ReprojectionError stays as the reference it is tested against.
 template <class Board, bool kRig>
 class ChainedReprojection final : public ceres::CostFunction {
  public:
@@ -165,29 +165,21 @@ class ChainedReprojection final : public ceres::CostFunction {
       return true;
     }
 
-    // xc = R X + t: Jets over the pose; dxc/dX = R.
-    using J6 = ceres::Jet<double, kPoseSize>;
-    J6 pose[kPoseSize], Xj[3], xc[3];
-    for (int i = 0; i < kPoseSize; ++i) pose[i] = J6(frame[i], i);
-    for (int i = 0; i < 3; ++i) Xj[i] = J6(X[i]);
-    TransformPoint(pose, Xj, xc);
-    double R[9];
-    ceres::AngleAxisToRotationMatrix(frame, ceres::RowMajorAdapter3x3(R));
+    // xc = R X + t, its pose derivatives in closed form; dxc/dX = R.
+    double xc[3], R[9], dxc_dw[9];
+    TransformPointWithJacobian(frame, X, xc, R, dxc_dw);
 
-    // Rig: xk = R_k xc + t_k, Jets over the rig pose; dxk/dxc = R_k.
-    double cam[3] = {xc[0].a, xc[1].a, xc[2].a};
+    // Rig: xk = R_k xc + t_k; dxk/dxc = R_k.
+    double cam[3] = {xc[0], xc[1], xc[2]};
     double dcam_dxc[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
     double dcam_drig[3][kPoseSize] = {};
     if (kRig) {
-      J6 rj[kPoseSize], in[3], out[3];
-      for (int i = 0; i < kPoseSize; ++i) rj[i] = J6(rig[i], i);
-      for (int i = 0; i < 3; ++i) in[i] = J6(cam[i]);
-      TransformPoint(rj, in, out);
+      double dk_dw[9];
+      TransformPointWithJacobian(rig, xc, cam, dcam_dxc, dk_dw);
       for (int i = 0; i < 3; ++i) {
-        cam[i] = out[i].a;
-        for (int k = 0; k < kPoseSize; ++k) dcam_drig[i][k] = out[i].v[k];
+        for (int j = 0; j < 3; ++j) dcam_drig[i][j] = dk_dw[3 * i + j];
+        dcam_drig[i][3 + i] = 1.0;
       }
-      ceres::AngleAxisToRotationMatrix(rig, ceres::RowMajorAdapter3x3(dcam_dxc));
     }
 
     // Projection: Jets over intrinsics and the camera point.
@@ -229,9 +221,10 @@ class ChainedReprojection final : public ceres::CostFunction {
         dr_dX[k][m] = dr_dxc[k][0] * R[m] + dr_dxc[k][1] * R[3 + m] + dr_dxc[k][2] * R[6 + m];
     if (double* J = jacobians[b]) {
       for (int k = 0; k < 2; ++k) {
-        for (int j = 0; j < kPoseSize; ++j) {
-          J[k * kFrameSize + j] =
-              dr_dxc[k][0] * xc[0].v[j] + dr_dxc[k][1] * xc[1].v[j] + dr_dxc[k][2] * xc[2].v[j];
+        for (int j = 0; j < 3; ++j) {
+          J[k * kFrameSize + j] = dr_dxc[k][0] * dxc_dw[j] + dr_dxc[k][1] * dxc_dw[3 + j] +
+                                  dr_dxc[k][2] * dxc_dw[6 + j];
+          J[k * kFrameSize + 3 + j] = dr_dxc[k][j];
         }
         for (int e = 0; e < Board::kFrameExtra; ++e) {
           J[k * kFrameSize + kPoseSize + e] =
@@ -490,7 +483,7 @@ struct Assembled {
   // The observations behind each residual block, in its residual order.
   std::vector<std::vector<uint32_t>> block_observations;
   std::vector<double*> frame_pose_blocks;
-  std::vector<double*> correction_blocks;  // free (non-constant) corrections
+  std::vector<double*> correction_blocks;  // free corrections, none partly held
 };
 
 template <class Board>
@@ -599,9 +592,12 @@ void AddResiduals(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params&
     Board::FixGauge(problem, p.corrections.data(),
                     std::vector<uint32_t>(d.gauge_corners.begin(), d.gauge_corners.end()));
   }
+  // A partly held gauge corner stays out of the eliminated set: with every
+  // eliminated block the same size, Ceres uses its fixed-size Schur kernels.
   for (uint32_t c = 0; c < d.num_corners; ++c) {
     double* block = &p.corrections[kCorrectionStride * c];
-    if (corner_used[c] && !problem.IsParameterBlockConstant(block)) {
+    if (corner_used[c] && !problem.IsParameterBlockConstant(block) &&
+        problem.ParameterBlockTangentSize(block) == Board::kCornerSize) {
       a.correction_blocks.push_back(block);
     }
   }
@@ -699,6 +695,11 @@ ceres::Solver::Options MakeSolverOptions(const ffi::SolveOptions& o) {
   s.num_threads = o.num_threads;
   s.minimizer_progress_to_stdout = false;  // stdout belongs to the CLI
   s.logging_type = ceres::SILENT;
+  // Every solve starts near its optimum (Zhang, or the previous stage), where
+  // Gauss-Newton steps are good.  Ceres' default radius (1e4) damps the weakly
+  // determined directions (k3, the board's bend against the pose) so much that
+  // they crawl in for many iterations; LM still shrinks the radius on a bad step.
+  s.initial_trust_region_radius = 1e8;
   return s;
 }
 
@@ -772,7 +773,7 @@ SolveReport solve(ProblemData& data, const SolveOptions& options) {
   }
   report.seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  if (options.verbose) std::fprintf(stderr, "%s\n", summary.BriefReport().c_str());
+  if (options.verbose) std::fprintf(stderr, "%s\n", summary.FullReport().c_str());
   return report;
 }
 

@@ -17,7 +17,7 @@ pub const MIN_CORNERS_PER_IMAGE: usize = 4;
 pub const MIN_IMAGES: usize = 3;
 
 /// Relative tolerance of the `standard` warm start before a deformation method.
-const WARM_START_TOLERANCE: f64 = 1e-4;
+const WARM_START_TOLERANCE: f64 = 1e-3;
 
 /// What the user asks of one calibration.
 #[derive(Debug, Clone, PartialEq)]

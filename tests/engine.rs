@@ -242,22 +242,29 @@ fn gauge_is_fixed_and_removes_exactly_the_free_directions() {
 #[test]
 fn chained_jacobian_equals_single_piece_autodiff() {
     // A stereo rig (rig block), bent board (frame block), print error (corner block),
-    // and non-unit weights: every path of the chain rule.
+    // and non-unit weights: every path of the chain rule.  Some rotations are set
+    // to zero and near it, where the closed-form pose derivative switches to its
+    // Taylor series.
     let (mut d, _) = deformcal::synthetic::Generator::new(Preset::Stereo, Some(6), 5).generate();
     for (i, o) in d.observations.iter_mut().enumerate() {
         o.weight = if i % 3 == 0 { 0.5 } else { 1.0 };
     }
     for m in Method::ALL {
         let c = run(&d, m, Loss::Cauchy);
+        let mut state = c.state.clone();
+        state.frame_poses[0].rotation = [0.0; 3];
+        state.frame_poses[1].rotation = [1e-3, -2e-3, 5e-4];
+        state.frame_poses[2].rotation = [0.0101, 0.0, 0.0];
+        state.camera_poses[1].rotation = [2e-4, 0.0, -1e-4];
         let problem = c.problem();
         let chained = problem
-            .evaluate(&c.state, &SolverSettings::default(), true)
+            .evaluate(&state, &SolverSettings::default(), true)
             .unwrap();
         let reference = SolverSettings {
             reference_jacobian: true,
             ..SolverSettings::default()
         };
-        let autodiff = problem.evaluate(&c.state, &reference, true).unwrap();
+        let autodiff = problem.evaluate(&state, &reference, true).unwrap();
         assert_eq!(
             chained.jacobian_col_idx, autodiff.jacobian_col_idx,
             "{m}: sparsity"
