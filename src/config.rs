@@ -47,7 +47,7 @@ pub struct CalibrationConfig {
     pub parameter_tolerance: f64,
     /// Corners whose correction fixes the gauge; default: SPEC's corners.
     pub gauge_corners: Option<Vec<usize>>,
-    /// Print Ceres' per-iteration log to stderr.
+    /// Print Ceres' per-iteration log and full report (timings) to stderr.
     pub verbose: bool,
 }
 
