@@ -4,7 +4,8 @@ and python3-mrcal) on identical 25-image subsets of the built-in t2 preset.
 
     cargo build --release && bench/compare.py [--subsets 10] [--repeats 3]
 
-For every subset it times deformcal's four methods, OpenCV's calibrateCamera
+For every subset it times deformcal's four methods (and `standard` without the
+robust loss, which must reproduce calibrateCamera's intrinsics), OpenCV's calibrateCamera
 (k1, k2, k3) and calibrateCameraRO (Strobl's static method), and mrcal's optimiser
 without and with its board warp (seeding included), then prints each tool's median
 wall time, its ratio to calibrateCamera, and its mapping error to the true
@@ -34,7 +35,9 @@ def load(folder):
     views = {}
     with open(os.path.join(folder, "observations.csv"), newline="") as f:
         for r in csv.DictReader(f):
-            views.setdefault(int(r["frame"]), {})[int(r["corner"])] = (float(r["u"]), float(r["v"]))
+            # calibrateCamera takes float32 pixels: every tool gets the same rounded values.
+            u, v = (float(np.float32(r[k])) for k in ("u", "v"))
+            views.setdefault(int(r["frame"]), {})[int(r["corner"])] = (u, v)
     with open(os.path.join(folder, "truth.json")) as f:
         truth = json.load(f)
     return views, truth
@@ -55,6 +58,17 @@ def truth_rays(k, width, height):
     return px, np.concatenate([n, np.ones((len(n), 1))], axis=1)
 
 
+def opencv_intrinsics(K, dist):
+    """OpenCV's camera matrix and distortion as the radial3 dict truth.json uses."""
+    d = np.ravel(dist)
+    return dict(fx=K[0, 0], fy=K[1, 1], cx=K[0, 2], cy=K[1, 2], k1=d[0], k2=d[1], k3=d[4])
+
+
+def as_opencv(k):
+    K = np.array([[k["fx"], 0, k["cx"]], [0, k["fy"], k["cy"]], [0, 0, 1.0]])
+    return K, np.array([k["k1"], k["k2"], 0, 0, k["k3"]])
+
+
 def mapping_error_opencv(px, rays, K, dist):
     p, _ = cv2.projectPoints(rays, np.zeros(3), np.zeros(3), K, dist)
     return float(np.sqrt(np.mean(np.sum((p.reshape(-1, 2) - px) ** 2, axis=1))))
@@ -65,12 +79,16 @@ def mapping_error_mrcal(px, rays, lensmodel, intrinsics):
     return float(np.sqrt(np.mean(np.sum((p - px) ** 2, axis=1))))
 
 
-def run_deformcal(binary, folder, method, rows, cols, spacing, width, height):
+TIGHT = "function_tolerance = 1e-15\nparameter_tolerance = 1e-15\ngradient_tolerance = 1e-15\nmax_iterations = 500\n"
+
+
+def run_deformcal(binary, folder, method, rows, cols, spacing, width, height, loss="cauchy", extra=""):
     cfg = os.path.join(folder, "c.toml")
     with open(cfg, "w") as f:
         f.write(f"[target]\nrows = {rows}\ncols = {cols}\nspacing = {spacing}\n")
         f.write(f'[[cameras]]\nname = "cam0"\nwidth = {width}\nheight = {height}\n')
         f.write('[data]\nobservations = "subset.csv"\n[output]\ndir = "out"\n')
+        f.write(f'[calibration]\nloss = "{loss}"\n{extra}')
     subprocess.run([binary, "--config", cfg, "--method", method], check=True, stdout=subprocess.DEVNULL)
     with open(os.path.join(folder, "out", "calibration.json")) as f:
         j = json.load(f)
@@ -128,6 +146,7 @@ def main():
     px, rays = truth_rays(truth["intrinsics"][0], width, height)
     board = np.array([((c % cols - (cols - 1) / 2) * spacing, (c // cols - (rows - 1) / 2) * spacing, 0.0) for c in range(ncorners)], dtype=np.float32)
     times, errors = {}, {}
+    agreement, agreement_tight = [], []
 
     def record(name, seconds, error):
         times.setdefault(name, []).append(seconds)
@@ -142,11 +161,14 @@ def main():
                 for c in range(ncorners):
                     u, v = views[fr][c]
                     f.write(f"cam0,{fr},{c},{u!r},{v!r}\n")
-        for m in ["standard", "static", "dynamic", "full"]:
-            runs = [run_deformcal(a.deformcal, folder, m, rows, cols, spacing, width, height) for _ in range(a.repeats)]
+        for m, loss in [("standard", "cauchy"), ("standard", "none"), ("static", "cauchy"), ("dynamic", "cauchy"), ("full", "cauchy")]:
+            runs = [run_deformcal(a.deformcal, folder, m, rows, cols, spacing, width, height, loss) for _ in range(a.repeats)]
             k = runs[-1][1]
-            K = np.array([[k["fx"], 0, k["cx"]], [0, k["fy"], k["cy"]], [0, 0, 1.0]])
-            record(f"deformcal {m}", statistics.median(r[0] for r in runs), mapping_error_opencv(px, rays, K, np.array([k["k1"], k["k2"], 0, 0, k["k3"]])))
+            name = f"deformcal {m}" + (", no loss" if loss == "none" else "")
+            record(name, statistics.median(r[0] for r in runs), mapping_error_opencv(px, rays, *as_opencv(k)))
+            if loss == "none":
+                unrobust = k
+                tight = run_deformcal(a.deformcal, folder, m, rows, cols, spacing, width, height, loss, TIGHT)[1]
         obj = [board.copy() for _ in frames]
         img = [np.array([views[fr][c] for c in range(ncorners)], dtype=np.float32) for fr in frames]
         flags = cv2.CALIB_ZERO_TANGENT_DIST
@@ -156,6 +178,10 @@ def main():
             _, K, dist, _, _ = cv2.calibrateCamera(obj, img, (width, height), None, None, flags=flags)
             runs.append(time.perf_counter() - start)
         record("OpenCV calibrateCamera", statistics.median(runs), mapping_error_opencv(px, rays, K, dist))
+        # The same model and cost as calibrateCamera: the intrinsics must agree.
+        cv_px, cv_rays = truth_rays(opencv_intrinsics(K, dist), width, height)
+        agreement.append(mapping_error_opencv(cv_px, cv_rays, *as_opencv(unrobust)))
+        agreement_tight.append(mapping_error_opencv(cv_px, cv_rays, *as_opencv(tight)))
         if not a.skip_ro:
             start = time.perf_counter()
             _, K, dist, _, _, _ = cv2.calibrateCameraRO(obj, img, (width, height), cols - 1, None, None, flags=flags)
@@ -177,6 +203,9 @@ def main():
         med = statistics.median(ts)
         e = errors[name]
         print(f"{name:28} {med * 1e3:10.1f} {med / base:18.2f}x {statistics.mean(e):15.3f} ± {statistics.pstdev(e):.3f}")
+    print("deformcal standard, no loss, against calibrateCamera's intrinsics (mapping error, mean / max):")
+    print(f"  default tolerances          {statistics.mean(agreement):.2e} / {max(agreement):.2e} px")
+    print(f"  tolerances 1e-15 (untimed)  {statistics.mean(agreement_tight):.2e} / {max(agreement_tight):.2e} px")
 
 
 if __name__ == "__main__":
