@@ -48,11 +48,16 @@ def grid(width, height, step=20):
     return np.stack([u.ravel(), v.ravel()], axis=1)
 
 
-def truth_rays(k, width, height):
-    """Normalised rays of a 20 px pixel grid under the true radial3 intrinsics."""
-    px = grid(width, height)
+def as_opencv(k):
+    """A radial3 intrinsics dict as OpenCV's camera matrix and distortion vector."""
     K = np.array([[k["fx"], 0, k["cx"]], [0, k["fy"], k["cy"]], [0, 0, 1.0]])
-    dist = np.array([k["k1"], k["k2"], 0, 0, k["k3"]])
+    return K, np.array([k["k1"], k["k2"], 0, 0, k["k3"]])
+
+
+def truth_rays(k, width, height):
+    """Normalised rays of a 20 px pixel grid under the radial3 intrinsics k."""
+    px = grid(width, height)
+    K, dist = as_opencv(k)
     crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14)
     n = cv2.undistortPointsIter(px.reshape(-1, 1, 2), K, dist, None, None, crit).reshape(-1, 2)
     return px, np.concatenate([n, np.ones((len(n), 1))], axis=1)
@@ -62,11 +67,6 @@ def opencv_intrinsics(K, dist):
     """OpenCV's camera matrix and distortion as the radial3 dict truth.json uses."""
     d = np.ravel(dist)
     return dict(fx=K[0, 0], fy=K[1, 1], cx=K[0, 2], cy=K[1, 2], k1=d[0], k2=d[1], k3=d[4])
-
-
-def as_opencv(k):
-    K = np.array([[k["fx"], 0, k["cx"]], [0, k["fy"], k["cy"]], [0, 0, 1.0]])
-    return K, np.array([k["k1"], k["k2"], 0, 0, k["k3"]])
 
 
 def mapping_error_opencv(px, rays, K, dist):

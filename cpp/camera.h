@@ -33,8 +33,6 @@ inline void ProjectRadial3(const T* intrinsics, const T* xc, T* uv) {
   uv[1] = intrinsics[1] * yn * d + intrinsics[3];
 }
 
-}  // namespace deformcal
-
 // x_out = R x + t for a double pose, with R and dx_out/dω (both row-major 3x3);
 // dx_out/dt is the identity.  Closed form, so the pose's derivatives cost one
 // sincos instead of six-wide Jets: d(R x)/dω = -[R x]_× J_l(ω), with SO(3)'s left
@@ -76,3 +74,5 @@ inline void TransformPointWithJacobian(const double* pose, const double* x, doub
       d_omega[3 * i + j] = Ny[3 * i] * Jl[j] + Ny[3 * i + 1] * Jl[3 + j] + Ny[3 * i + 2] * Jl[6 + j];
   for (int i = 0; i < 3; ++i) x_out[i] = y[i] + pose[3 + i];
 }
+
+}  // namespace deformcal
