@@ -23,7 +23,7 @@ fn main() {
         std::process::exit(1);
     }
 
-    let mut build = cxx_build::bridge("src/ffi.rs");
+    let mut build = cxx_build::bridge("src/solver/bridge.rs");
     build
         .file("cpp/solver.cc")
         .std("c++17")
@@ -39,7 +39,7 @@ fn main() {
     println!("cargo:rustc-link-lib=ceres");
     println!("cargo:rustc-link-lib=glog");
     for f in [
-        "src/ffi.rs",
+        "src/solver/bridge.rs",
         "cpp/bridge.h",
         "cpp/board.h",
         "cpp/camera.h",

@@ -1,7 +1,7 @@
 //! Times one 25-image calibration of each method on the `t2` preset, one thread.
 //! Run with `cargo bench`; prints median and best wall time per method.
-use deformcal::problem::SolverSettings;
-use deformcal::synthetic::{generate, Preset};
+use deformcal::model::synthetic::{generate, Preset};
+use deformcal::solver::problem::SolverSettings;
 use deformcal::{calibrate, Method, Request};
 use std::time::Instant;
 

@@ -1,8 +1,8 @@
 //! Times the evaluation protocol on the `t2` preset: 4 methods × 50 subsets × 25
 //! images with the 650-image reference, on all cores. `SUBSETS=n cargo bench --bench
 //! protocol` runs a shorter variant.
-use deformcal::config::{Config, ProtocolConfig};
-use deformcal::protocol::{prepare, test_rmse};
+use deformcal::app::config::{Config, ProtocolConfig};
+use deformcal::app::protocol::{prepare, test_rmse};
 use std::path::Path;
 use std::time::Instant;
 

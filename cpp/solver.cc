@@ -19,7 +19,7 @@
 
 #include "deformcal/cpp/board.h"
 #include "deformcal/cpp/camera.h"
-#include "deformcal/src/ffi.rs.h"
+#include "deformcal/src/solver/bridge.rs.h"
 
 namespace deformcal {
 namespace {

@@ -1,66 +1,39 @@
-//! deformcal: camera calibration with chessboards that bend while carried.
+//! deformcal: camera calibration with chessboards that bend while they are carried.
 //!
-//! Implements the four methods of Hagemann, Knorr and Stiller (WACV 2022) —
-//! `standard`, `static`, `dynamic`, `full` — over a Ceres core in C++.
-pub mod calibrate;
-pub mod camera;
-pub mod capi;
-pub mod config;
-pub mod deformation;
+//! Implements the four methods of Hagemann, Knorr and Stiller (WACV 2022),
+//! `standard`, `static`, `dynamic` and `full`, over a Ceres core in C++.
+//!
+//! # Layout
+//! Three layers, each depending only on the ones before it (checked by
+//! `tests/layers.rs`):
+//! - [`model`]: the mathematics, pure Rust with no I/O and no C++: lens models,
+//!   poses, board models, datasets, initialisation, metrics, synthetic data.
+//! - [`solver`]: the Ceres problem behind the one cxx bridge, the gauge, and the
+//!   calibration pipeline (initialise → `standard` → the method).
+//! - [`app`]: everything that meets the user: config, file formats, the
+//!   evaluation protocol, reports, plots and the C API.
+//!
+//! # Glossary
+//! - **target** (or board): the printed chessboard, `rows × cols` inner corners.
+//!   "Board" is used for its geometry (board point, board frame, board model).
+//! - **corner**: one inner corner of the target, index `row * cols + col`.
+//! - **frame**: one time step; all cameras of a rig see the target in the same
+//!   pose during a frame. With one camera, a frame is one image.
+//! - **view**: one camera's image of one frame.
+//! - **method**: what is estimated of the board's shape (`standard`, `static`,
+//!   `dynamic`, `full`); each method is one board model of the solver.
+//! - **lens model**: the camera's projection (`radial3`, …), named by `model`.
+//! - Transforms are named `to_from_from`: `camera_from_board` maps board points
+//!   into the camera frame.
+pub mod app;
 pub mod error;
-pub mod ffi;
-pub mod interchange;
-pub mod metrics;
-pub mod observations;
-pub mod output;
-pub mod plots;
-pub mod problem;
-pub mod protocol;
-pub mod protocol_report;
-pub mod report;
-pub mod rig;
-pub mod synthetic;
-pub mod target;
-pub mod zhang;
+pub mod model;
+pub mod solver;
 
-pub use calibrate::{calibrate, Calibration, Request};
-pub use camera::{Intrinsics, Pose};
-pub use config::Config;
-pub use deformation::{Method, Paraboloid};
+pub use app::config::Config;
 pub use error::{Error, Result};
-pub use observations::{Dataset, Observation};
-pub use target::Target;
-
-use config::DataSource;
-
-/// Loads the dataset a data source names, for the given board and cameras.
-pub fn load_source(
-    source: &DataSource,
-    target: Target,
-    cameras: &[config::CameraSpec],
-) -> Result<(Dataset, Option<synthetic::Truth>)> {
-    match source {
-        DataSource::Observations(path) => {
-            Ok((Dataset::read_csv(path, target, cameras.to_vec())?, None))
-        }
-        DataSource::CornersVnl { path, patterns } => {
-            let (d, _) = interchange::read_corners_vnl(path, target, cameras.to_vec(), patterns)?;
-            Ok((d, None))
-        }
-        DataSource::Synthetic {
-            preset,
-            images,
-            seed,
-            cameras: n,
-        } => {
-            let (mut d, t) = synthetic::Generator::new(*preset, *images, *seed)
-                .with_cameras(*n)
-                .generate();
-            // The config may rename the simulated cameras.
-            for (spec, given) in d.cameras.iter_mut().zip(cameras) {
-                spec.name = given.name.clone();
-            }
-            Ok((d, Some(t)))
-        }
-    }
-}
+pub use model::board::{Method, Paraboloid};
+pub use model::camera::{Intrinsics, Pose};
+pub use model::dataset::{Dataset, Observation};
+pub use model::target::Target;
+pub use solver::calibrate::{calibrate, Calibration, Request};

@@ -1,11 +1,12 @@
 //! The `deformcal` command line.
 use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand};
-use deformcal::config::Config;
-use deformcal::problem::SolverSettings;
-use deformcal::protocol::{self, Shard};
-use deformcal::synthetic::{Generator, Preset};
-use deformcal::{calibrate, output, report, Method, Request};
+use deformcal::app::config::Config;
+use deformcal::app::protocol::{self, Shard};
+use deformcal::app::{output, report};
+use deformcal::model::synthetic::{Generator, Preset};
+use deformcal::solver::problem::SolverSettings;
+use deformcal::{calibrate, Method, Request};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -130,7 +131,7 @@ struct GenerateArgs {
     #[arg(long)]
     images: Option<usize>,
     /// Random seed.
-    #[arg(long, default_value_t = deformcal::config::DEFAULT_SYNTHETIC_SEED)]
+    #[arg(long, default_value_t = deformcal::app::config::DEFAULT_SYNTHETIC_SEED)]
     seed: u64,
     /// Cameras on the simulated rig, 0.3 m apart (default: the preset's).
     #[arg(long)]
@@ -154,7 +155,8 @@ fn run_calibrate(args: CalibrateArgs) -> Result<()> {
         anyhow::ensure!((1..=256).contains(&t), "--threads must be 1 to 256");
         config.calibration.threads = t;
     }
-    let (dataset, _truth) = deformcal::load_source(&config.data, config.target, &config.cameras)?;
+    let (dataset, _truth) =
+        deformcal::app::source::load_source(&config.data, config.target, &config.cameras)?;
     let request = Request {
         method: config.calibration.method,
         settings: SolverSettings::from(&config.calibration),
@@ -181,7 +183,7 @@ fn run_generate(args: GenerateArgs) -> Result<()> {
     let (dataset, truth) = Generator::new(preset, args.images, args.seed)
         .with_cameras(cameras)
         .generate();
-    deformcal::synthetic::write_preset(&args.out, &dataset, &truth)?;
+    deformcal::app::source::write_preset(&args.out, &dataset, &truth)?;
     println!(
         "wrote {} images, {} observations of preset {} to {}",
         dataset.num_frames(),
@@ -194,8 +196,9 @@ fn run_generate(args: GenerateArgs) -> Result<()> {
 
 fn run_import(args: ImportArgs) -> Result<()> {
     let config = Config::load(&args.config)?;
-    let (dataset, _) = deformcal::load_source(&config.data, config.target, &config.cameras)?;
-    dataset.write_csv(&args.out)?;
+    let (dataset, _) =
+        deformcal::app::source::load_source(&config.data, config.target, &config.cameras)?;
+    deformcal::app::observations_csv::write(&dataset, &args.out)?;
     println!(
         "wrote {} observations of {} frames to {}",
         dataset.observations.len(),
@@ -208,12 +211,13 @@ fn run_import(args: ImportArgs) -> Result<()> {
 fn run_export(args: ExportArgs) -> Result<()> {
     let text = std::fs::read_to_string(&args.calibration)
         .with_context(|| format!("{}", args.calibration.display()))?;
-    let json: output::CalibrationJson = serde_json::from_str(&text).with_context(|| {
-        format!(
-            "{}: not a deformcal calibration.json",
-            args.calibration.display()
-        )
-    })?;
+    let json: deformcal::app::calibration_json::CalibrationJson = serde_json::from_str(&text)
+        .with_context(|| {
+            format!(
+                "{}: not a deformcal calibration.json",
+                args.calibration.display()
+            )
+        })?;
     output::write_models(&args.output, &json)?;
     println!(
         "wrote calibration.json, opencv.yaml and {} camera model(s) to {}",
@@ -266,8 +270,8 @@ fn protocol_rows(
     Ok((setup.header, rows))
 }
 
-fn print_summary(summary: &deformcal::protocol_report::Summary) {
-    use deformcal::protocol_report::camera_key;
+fn print_summary(summary: &deformcal::app::protocol_report::Summary) {
+    use deformcal::app::protocol_report::camera_key;
     let h = &summary.header;
     println!("{}", h.dataset);
     for (k, cam) in h.cameras.iter().enumerate() {
@@ -329,7 +333,7 @@ fn run_protocol(args: ProtocolArgs) -> Result<()> {
             let path = config
                 .output_dir
                 .join(format!("shard-{}-of-{}.json", s.index, s.count));
-            output::write_atomic(&path, serde_json::to_string(&file)?.as_bytes())?;
+            deformcal::app::fsio::write_atomic(&path, serde_json::to_string(&file)?.as_bytes())?;
             println!(
                 "wrote {} ({} calibrations) in {:.1} s",
                 path.display(),
@@ -339,7 +343,7 @@ fn run_protocol(args: ProtocolArgs) -> Result<()> {
         }
         None => {
             let summary =
-                deformcal::protocol_report::write_outputs(&config.output_dir, &header, &rows)?;
+                deformcal::app::protocol_report::write_outputs(&config.output_dir, &header, &rows)?;
             print_summary(&summary);
             println!(
                 "wrote {} in {:.1} s",
@@ -360,7 +364,7 @@ fn run_merge(args: MergeArgs) -> Result<()> {
         files.push(f);
     }
     let (header, rows) = protocol::merge(files)?;
-    let summary = deformcal::protocol_report::write_outputs(&args.output, &header, &rows)?;
+    let summary = deformcal::app::protocol_report::write_outputs(&args.output, &header, &rows)?;
     print_summary(&summary);
     println!("wrote {}", args.output.join("report.md").display());
     Ok(())
@@ -383,15 +387,15 @@ fn run_batch(args: BatchArgs) -> Result<()> {
         );
         let (header, rows) = protocol_rows(&config, args.subsets, None, args.threads)?;
         let dir = args.output.join(&name);
-        let summary = deformcal::protocol_report::write_outputs(&dir, &header, &rows)?;
+        let summary = deformcal::app::protocol_report::write_outputs(&dir, &header, &rows)?;
         print_summary(&summary);
-        report.push_str(&deformcal::protocol_report::report_markdown(
+        report.push_str(&deformcal::app::protocol_report::report_markdown(
             &summary,
             &rows,
             &format!("{name}/"),
         ));
     }
-    output::write_atomic(&args.output.join("report.md"), report.as_bytes())?;
+    deformcal::app::fsio::write_atomic(&args.output.join("report.md"), report.as_bytes())?;
     println!(
         "wrote {} in {:.1} s",
         args.output.join("report.md").display(),

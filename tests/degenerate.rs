@@ -2,11 +2,11 @@
 //! outliers are held off by the Cauchy loss and reported.
 mod common;
 use common::*;
-use deformcal::config::Loss;
-use deformcal::metrics::mapping_error_rot;
-use deformcal::output::CalibrationJson;
-use deformcal::problem::SolverSettings;
-use deformcal::synthetic::{Generator, Preset};
+use deformcal::app::calibration_json::CalibrationJson;
+use deformcal::model::metrics::mapping_error_rot;
+use deformcal::model::synthetic::{Generator, Preset};
+use deformcal::solver::problem::Loss;
+use deformcal::solver::problem::SolverSettings;
 use deformcal::{calibrate, Method, Request};
 
 fn request(method: Method) -> Request {
@@ -87,7 +87,7 @@ fn a_solve_that_does_not_converge_says_so() {
     };
     let c = calibrate(&d, &r).unwrap();
     assert!(!c.converged);
-    assert!(deformcal::report::summary(&c).contains("NOT CONVERGED"));
+    assert!(deformcal::app::report::summary(&c).contains("NOT CONVERGED"));
     let json = CalibrationJson::from(&c);
     assert!(!json.converged);
     assert!(

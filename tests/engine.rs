@@ -1,9 +1,9 @@
 //! The calibration engine against synthetic ground truth.
 mod common;
 use common::*;
-use deformcal::config::Loss;
-use deformcal::problem::{Problem, SolverSettings};
-use deformcal::synthetic::Preset;
+use deformcal::model::synthetic::Preset;
+use deformcal::solver::problem::Loss;
+use deformcal::solver::problem::{Problem, SolverSettings};
 use deformcal::{Calibration, Method};
 use nalgebra::{DMatrix, Vector3};
 
@@ -12,7 +12,7 @@ fn noise_rmse(sigma: f64) -> f64 {
     std::f64::consts::SQRT_2 * sigma
 }
 
-fn rot_error(c: &Calibration, t: &deformcal::synthetic::Truth) -> f64 {
+fn rot_error(c: &Calibration, t: &deformcal::model::synthetic::Truth) -> f64 {
     truth_error_rot(c, t, 0)
 }
 
@@ -245,7 +245,8 @@ fn chained_jacobian_equals_single_piece_autodiff() {
     // and non-unit weights: every path of the chain rule.  Some rotations are set
     // to zero and near it, where the closed-form pose derivative switches to its
     // Taylor series.
-    let (mut d, _) = deformcal::synthetic::Generator::new(Preset::Stereo, Some(6), 5).generate();
+    let (mut d, _) =
+        deformcal::model::synthetic::Generator::new(Preset::Stereo, Some(6), 5).generate();
     for (i, o) in d.observations.iter_mut().enumerate() {
         o.weight = if i % 3 == 0 { 0.5 } else { 1.0 };
     }

@@ -1,10 +1,10 @@
 //! Interchange: exports read back by the real OpenCV and mrcal, corners.vnl in,
 //! and corners found by the real mrgingham on rendered images.
 mod common;
-use deformcal::interchange::write_corners_vnl;
-use deformcal::output::CalibrationJson;
-use deformcal::synthetic::Generator;
-use deformcal::synthetic::Preset;
+use deformcal::app::calibration_json::CalibrationJson;
+use deformcal::app::corners_vnl::write_corners_vnl;
+use deformcal::model::synthetic::Generator;
+use deformcal::model::synthetic::Preset;
 use deformcal::{Intrinsics, Pose};
 use nalgebra::Vector3;
 use std::io::Write;

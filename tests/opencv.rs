@@ -1,9 +1,9 @@
 //! `standard` with loss `none` against OpenCV's calibrateCamera on identical observations.
 mod common;
 use common::*;
-use deformcal::config::Loss;
-use deformcal::problem::SolverSettings;
-use deformcal::synthetic::Preset;
+use deformcal::model::synthetic::Preset;
+use deformcal::solver::problem::Loss;
+use deformcal::solver::problem::SolverSettings;
 use deformcal::{calibrate, Method, Request};
 use std::process::Command;
 
@@ -19,7 +19,7 @@ fn standard_matches_opencv_calibrate_camera() {
     }
     let dir = tempfile::tempdir().unwrap();
     let csv = dir.path().join("observations.csv");
-    d.write_csv(&csv).unwrap();
+    deformcal::app::observations_csv::write(&d, &csv).unwrap();
     let t = d.target;
     let cam = &d.cameras[0];
     let out = Command::new(PYTHON)

@@ -1,10 +1,10 @@
 //! The evaluation protocol: reproducibility, sharding, and the paper's findings on
 //! the synthetic presets (quick variants of configs/protocol_*.toml).
 mod common;
-use deformcal::config::{Config, ProtocolConfig};
-use deformcal::problem::{Hold, Problem, SolverSettings};
-use deformcal::protocol::{draw_subsets, merge, prepare, Setup, Shard, ShardFile};
-use deformcal::protocol_report::{protocol_csv, summarise, Summary};
+use deformcal::app::config::{Config, ProtocolConfig};
+use deformcal::app::protocol::{draw_subsets, merge, prepare, Setup, Shard, ShardFile};
+use deformcal::app::protocol_report::{protocol_csv, summarise, Summary};
+use deformcal::solver::problem::{Hold, Problem, SolverSettings};
 use deformcal::Method;
 use std::path::Path;
 use std::process::Command;
@@ -23,7 +23,11 @@ fn setup(preset: &str, reference_images: usize, subsets: usize, methods: &[Metho
     prepare(&config, &protocol).unwrap()
 }
 
-fn run_on(setup: &Setup, threads: usize, shard: Option<Shard>) -> Vec<deformcal::protocol::Row> {
+fn run_on(
+    setup: &Setup,
+    threads: usize,
+    shard: Option<Shard>,
+) -> Vec<deformcal::app::protocol::Row> {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
@@ -170,7 +174,7 @@ fn pose_only_refit_evaluates_like_the_general_problem() {
         deformations: true,
     };
     let plain = SolverSettings {
-        loss: deformcal::config::Loss::None,
+        loss: deformcal::solver::problem::Loss::None,
         ..settings.clone()
     };
     let general = problem(Hold::default())
@@ -254,10 +258,11 @@ fn cli_shards_merge_into_the_unsharded_outputs() {
 fn a_failed_subset_is_recorded_and_the_run_goes_on() {
     // Ten images, six of them with only three corners: subsets of four images
     // sometimes keep fewer than the three usable images a calibration needs.
-    let (mut d, _) = deformcal::synthetic::generate(deformcal::synthetic::Preset::T2, Some(10), 4);
+    let (mut d, _) =
+        deformcal::model::synthetic::generate(deformcal::model::synthetic::Preset::T2, Some(10), 4);
     d.observations.retain(|o| o.frame < 4 || o.corner < 3);
     let dir = tempfile::tempdir().unwrap();
-    d.write_csv(&dir.path().join("obs.csv")).unwrap();
+    deformcal::app::observations_csv::write(&d, &dir.path().join("obs.csv")).unwrap();
     let config = Config::parse(
         "[target]\nrows = 13\ncols = 13\nspacing = 0.07\n[[cameras]]\nname = \"cam0\"\nwidth = 1936\nheight = 1216\n[data]\nobservations = \"obs.csv\"\n",
         &dir.path().join("c.toml"),

@@ -1,8 +1,8 @@
 //! Several cameras: rig poses, per-camera intrinsics, shared deformation.
 mod common;
 use common::*;
-use deformcal::config::Loss;
-use deformcal::synthetic::{Generator, Preset, Truth};
+use deformcal::model::synthetic::{Generator, Preset, Truth};
+use deformcal::solver::problem::Loss;
 use deformcal::{Calibration, Dataset, Method, Pose};
 use nalgebra::{Rotation3, Vector3};
 
@@ -141,9 +141,9 @@ fn a_disconnected_camera_is_named() {
 
 #[test]
 fn protocol_reports_every_camera() {
-    use deformcal::config::{Config, ProtocolConfig};
-    use deformcal::protocol::prepare;
-    use deformcal::protocol_report::{camera_key, protocol_csv, summarise};
+    use deformcal::app::config::{Config, ProtocolConfig};
+    use deformcal::app::protocol::prepare;
+    use deformcal::app::protocol_report::{camera_key, protocol_csv, summarise};
     let config = Config::parse(
         "[data]\nsynthetic = \"stereo\"\n[reference]\nsynthetic = \"reference\"\ncameras = 2\nimages = 60\n",
         std::path::Path::new("stereo.toml"),

@@ -1,7 +1,7 @@
 #![no_main]
 //! The corners.vnl parser never panics, with and without camera patterns.
-use deformcal::config::CameraSpec;
-use deformcal::interchange::parse_corners_vnl;
+use deformcal::model::camera::CameraSpec;
+use deformcal::app::corners_vnl::parse_corners_vnl;
 use deformcal::Target;
 use libfuzzer_sys::fuzz_target;
 use std::collections::BTreeMap;

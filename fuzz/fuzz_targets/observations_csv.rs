@@ -1,6 +1,6 @@
 #![no_main]
 //! The observations CSV parser never panics, and what it accepts is consistent.
-use deformcal::config::CameraSpec;
+use deformcal::model::camera::CameraSpec;
 use deformcal::{Dataset, Target};
 use libfuzzer_sys::fuzz_target;
 use std::path::Path;
@@ -11,7 +11,7 @@ fuzz_target!(|data: &[u8]| {
         .iter()
         .map(|n| CameraSpec { name: n.to_string(), width: 640, height: 480, model: "radial3".into() })
         .collect();
-    if let Ok(d) = Dataset::parse_csv(data, Path::new("/fuzz/obs.csv"), target, cameras) {
+    if let Ok(d) = deformcal::app::observations_csv::parse(data, Path::new("/fuzz/obs.csv"), target, cameras) {
         assert!(!d.observations.is_empty());
         for o in &d.observations {
             assert!(o.camera < 2 && o.frame < d.frame_ids.len() && o.corner < 20);

@@ -1,9 +1,9 @@
 //! Shared helpers for the integration tests.
 #![allow(dead_code)]
-use deformcal::config::Loss;
-use deformcal::metrics::mapping_error;
-use deformcal::problem::SolverSettings;
-use deformcal::synthetic::{Generator, Preset, Truth};
+use deformcal::model::metrics::mapping_error;
+use deformcal::model::synthetic::{Generator, Preset, Truth};
+use deformcal::solver::problem::Loss;
+use deformcal::solver::problem::SolverSettings;
 use deformcal::{calibrate, Calibration, Dataset, Method, Request};
 
 /// A synthetic preset with scaled bend and print error.
@@ -77,7 +77,7 @@ pub fn aligned_rms(est: &[nalgebra::Vector3<f64>], truth: &[nalgebra::Vector3<f6
 /// Mapping error to the truth with the best virtual rotation removed, camera `k`.
 pub fn truth_error_rot(c: &Calibration, truth: &Truth, k: usize) -> f64 {
     let cam = &c.dataset.cameras[k];
-    deformcal::metrics::mapping_error_rot(
+    deformcal::model::metrics::mapping_error_rot(
         &truth.intrinsics[k],
         &c.state.intrinsics[k],
         cam.width,

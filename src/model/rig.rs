@@ -1,8 +1,8 @@
 //! Several cameras: the relative poses π_k (camera-k-from-camera-0) at initialisation,
 //! from the board poses each camera sees, robustly averaged and chained over the
 //! cameras' overlap graph.
-use crate::camera::Pose;
 use crate::error::{Error, Result};
+use crate::model::camera::Pose;
 use nalgebra::{Matrix4, Quaternion, UnitQuaternion, Vector3};
 
 /// Robust average of rigid transforms: the medoid (least total rotation angle to the

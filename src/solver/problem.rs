@@ -1,14 +1,24 @@
 //! Problem assembly: turns a dataset, a method and a parameter state into the
 //! Ceres problem behind the bridge, and the solution back into typed values.
-use crate::camera::{Intrinsics, Pose};
-use crate::config::{CalibrationConfig, Loss};
-use crate::deformation::{Method, Paraboloid};
-use crate::error::{Error, Result};
-use crate::ffi::bridge::{self, LossKind, ProblemData, SolveOptions};
-use crate::observations::Dataset;
-use crate::target::Target;
+use crate::model::camera::{Intrinsics, Pose};
 
-pub use crate::ffi::bridge::{Evaluation, SolveReport};
+use crate::error::{Error, Result};
+use crate::model::board::{Method, Paraboloid};
+use crate::model::dataset::Dataset;
+use crate::model::target::Target;
+use crate::solver::bridge::ffi::{self, LossKind, ProblemData, SolveOptions};
+
+pub use crate::solver::bridge::ffi::{Evaluation, SolveReport};
+
+/// Robust loss choice.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Loss {
+    /// Plain least squares.
+    None,
+    /// Cauchy loss with `loss_scale_px`.
+    Cauchy,
+}
 
 /// Every parameter of a calibration: the state the solver refines.
 #[derive(Debug, Clone, PartialEq)]
@@ -71,26 +81,20 @@ pub struct SolverSettings {
     pub reference_jacobian: bool,
 }
 
-impl From<&CalibrationConfig> for SolverSettings {
-    fn from(c: &CalibrationConfig) -> Self {
-        SolverSettings {
-            loss: c.loss,
-            loss_scale_px: c.loss_scale_px,
-            threads: c.threads,
-            max_iterations: c.max_iterations,
-            function_tolerance: c.function_tolerance,
-            gradient_tolerance: c.gradient_tolerance,
-            parameter_tolerance: c.parameter_tolerance,
-            fix_gauge: true,
-            verbose: c.verbose,
-            reference_jacobian: false,
-        }
-    }
-}
-
 impl Default for SolverSettings {
     fn default() -> Self {
-        SolverSettings::from(&CalibrationConfig::default())
+        SolverSettings {
+            loss: Loss::Cauchy,
+            loss_scale_px: 1.0,
+            threads: 1,
+            max_iterations: 100,
+            function_tolerance: 1e-8,
+            gradient_tolerance: 1e-10,
+            parameter_tolerance: 1e-6,
+            fix_gauge: true,
+            verbose: false,
+            reference_jacobian: false,
+        }
     }
 }
 
@@ -233,7 +237,7 @@ impl Problem<'_> {
         }
         let n = d.observations.len();
         let mut data = ProblemData {
-            model: self.method.board_model(),
+            model: board_model(self.method),
             num_cameras: d.cameras.len(),
             num_frames: d.num_frames(),
             num_corners: t.num_corners(),
@@ -286,7 +290,7 @@ impl Problem<'_> {
     /// Refines `state` in place; an unusable solve is an error, a non-converged one is reported.
     pub fn solve(&self, state: &mut State, settings: &SolverSettings) -> Result<SolveReport> {
         let mut data = self.data(state)?;
-        let mut report = bridge::solve(&mut data, &settings.options())
+        let mut report = ffi::solve(&mut data, &settings.options())
             .map_err(|e| Error::Solver(e.what().to_string()))?;
         if !report.usable {
             return Err(Error::Solver(format!(
@@ -330,7 +334,7 @@ impl Problem<'_> {
         with_jacobian: bool,
     ) -> Result<Evaluation> {
         let data = self.data(state)?;
-        let mut e = bridge::evaluate(&data, &settings.options(), with_jacobian)
+        let mut e = ffi::evaluate(&data, &settings.options(), with_jacobian)
             .map_err(|e| Error::Solver(e.what().to_string()))?;
         self.unweight(&mut e.residuals);
         Ok(e)
@@ -352,4 +356,14 @@ pub fn rmse(residuals: &[f64]) -> f64 {
         return f64::NAN;
     }
     (residuals.iter().map(|r| r * r).sum::<f64>() / n as f64).sqrt()
+}
+
+/// The bridge's name for a method's board model.
+fn board_model(method: Method) -> ffi::BoardModel {
+    match method {
+        Method::Standard => ffi::BoardModel::Standard,
+        Method::Static => ffi::BoardModel::Static,
+        Method::Dynamic => ffi::BoardModel::Dynamic,
+        Method::Full => ffi::BoardModel::Full,
+    }
 }

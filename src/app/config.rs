@@ -1,36 +1,13 @@
 //! The TOML config (SPEC §5): typed, unknown keys rejected, values checked by key.
-use crate::deformation::Method;
 use crate::error::{Error, Result};
-use crate::synthetic::Preset;
-use crate::target::Target;
+use crate::model::board::Method;
+use crate::model::camera::CameraSpec;
+use crate::model::synthetic::Preset;
+use crate::model::target::Target;
+use crate::solver::problem::{Loss, SolverSettings};
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-
-/// A camera of the rig as the config describes it.
-#[derive(Debug, Clone, PartialEq, Deserialize, serde::Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct CameraSpec {
-    pub name: String,
-    pub width: u32,
-    pub height: u32,
-    #[serde(default = "default_model")]
-    pub model: String,
-}
-
-fn default_model() -> String {
-    "radial3".into()
-}
-
-/// Robust loss choice.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Loss {
-    /// Plain least squares.
-    None,
-    /// Cauchy loss with `loss_scale_px`.
-    Cauchy,
-}
 
 /// `[calibration]`: the method and the solver settings.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -53,17 +30,36 @@ pub struct CalibrationConfig {
 
 impl Default for CalibrationConfig {
     fn default() -> Self {
+        // One set of solver defaults: the solver's own.
+        let s = SolverSettings::default();
         CalibrationConfig {
             method: Method::Full,
-            loss: Loss::Cauchy,
-            loss_scale_px: 1.0,
-            threads: 1,
-            max_iterations: 100,
-            function_tolerance: 1e-8,
-            gradient_tolerance: 1e-10,
-            parameter_tolerance: 1e-6,
+            loss: s.loss,
+            loss_scale_px: s.loss_scale_px,
+            threads: s.threads,
+            max_iterations: s.max_iterations,
+            function_tolerance: s.function_tolerance,
+            gradient_tolerance: s.gradient_tolerance,
+            parameter_tolerance: s.parameter_tolerance,
             gauge_corners: None,
-            verbose: false,
+            verbose: s.verbose,
+        }
+    }
+}
+
+impl From<&CalibrationConfig> for SolverSettings {
+    fn from(c: &CalibrationConfig) -> Self {
+        SolverSettings {
+            loss: c.loss,
+            loss_scale_px: c.loss_scale_px,
+            threads: c.threads,
+            max_iterations: c.max_iterations,
+            function_tolerance: c.function_tolerance,
+            gradient_tolerance: c.gradient_tolerance,
+            parameter_tolerance: c.parameter_tolerance,
+            fix_gauge: true,
+            verbose: c.verbose,
+            reference_jacobian: false,
         }
     }
 }

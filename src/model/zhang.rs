@@ -1,7 +1,7 @@
 //! Zhang's initialisation: normalised DLT homographies, closed-form intrinsics,
 //! and board poses from homographies.
-use crate::camera::{Intrinsics, Pose};
 use crate::error::{Error, Result};
+use crate::model::camera::{Intrinsics, Pose};
 use nalgebra::{DMatrix, Matrix3, Rotation3, Vector2, Vector3};
 
 /// Hartley normalisation: centroid at the origin, mean distance √2.

@@ -3,19 +3,16 @@
 //! Board sizes follow the paper's Fig. 3 caption, the per-image out-of-plane
 //! deformation magnitudes its Table S2 (mean ± std of the maximum Δz), the camera
 //! its Allied Vision MG-235B (1936×1216, 5.86 µm pixels) with a 17 mm lens.
-use crate::camera::{Intrinsics, Pose};
-use crate::config::CameraSpec;
-use crate::deformation::Paraboloid;
-use crate::error::Result;
-use crate::observations::Dataset;
-use crate::output::write_atomic;
-use crate::target::Target;
+use crate::model::board::Paraboloid;
+use crate::model::camera::CameraSpec;
+use crate::model::camera::{Intrinsics, Pose};
+use crate::model::dataset::Dataset;
+use crate::model::target::Target;
 use nalgebra::{Rotation3, Vector2, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
-use std::path::Path;
 
 /// A built-in dataset.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -439,12 +436,4 @@ impl Generator {
 /// Shorthand: the preset's dataset and truth.
 pub fn generate(preset: Preset, images: Option<usize>, seed: u64) -> (Dataset, Truth) {
     Generator::new(preset, images, seed).generate()
-}
-
-/// Writes `observations.csv` and `truth.json` into `dir`.
-pub fn write_preset(dir: &Path, dataset: &Dataset, truth: &Truth) -> Result<()> {
-    std::fs::create_dir_all(dir).map_err(|e| crate::error::Error::io(dir, e))?;
-    dataset.write_csv(&dir.join("observations.csv"))?;
-    let json = serde_json::to_string_pretty(truth).expect("truth serialises");
-    write_atomic(&dir.join("truth.json"), json.as_bytes())
 }

@@ -1,45 +1,16 @@
 //! Protocol outputs: `protocol.csv`, `deformations.csv`, `summary.json`, `report.md`
 //! and its SVG plots. Written from the merged rows alone, so a sharded run and
 //! its merge write exactly what one unsharded run writes.
-use crate::deformation::Method;
+use crate::app::fsio::write_atomic;
+use crate::app::plots::{self, HLine, Series, PALETTE};
+use crate::app::protocol::{CameraRow, Header, Row};
 use crate::error::{Error, Result};
-use crate::output::write_atomic;
-use crate::plots::{self, HLine, Series, PALETTE};
-use crate::protocol::{CameraRow, Header, Row};
+use crate::model::board::Method;
+use crate::model::metrics::Stat;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::fmt::Write;
 use std::path::Path;
-
-/// Mean and sample standard deviation of a metric.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct Stat {
-    pub mean: f64,
-    pub std: f64,
-    pub n: usize,
-}
-
-impl Stat {
-    /// Statistics of the finite values; `None` when there are none.
-    pub fn of(values: impl IntoIterator<Item = f64>) -> Option<Stat> {
-        let v: Vec<f64> = values.into_iter().filter(|x| x.is_finite()).collect();
-        if v.is_empty() {
-            return None;
-        }
-        let n = v.len() as f64;
-        let mean = v.iter().sum::<f64>() / n;
-        let std = if v.len() > 1 {
-            (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
-        } else {
-            0.0
-        };
-        Some(Stat {
-            mean,
-            std,
-            n: v.len(),
-        })
-    }
-}
 
 /// Per-method block of `summary.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -455,7 +426,7 @@ pub fn write_plots(dir: &Path, summary: &Summary, rows: &[Row]) -> Result<()> {
     )?;
 
     // Intrinsics of camera 0, with the reference and the truth.
-    let lines = |f: fn(&crate::camera::Intrinsics) -> f64| {
+    let lines = |f: fn(&crate::model::camera::Intrinsics) -> f64| {
         let mut lines = Vec::new();
         if let Some(r) = &h.reference {
             lines.push(HLine {

@@ -1,6 +1,5 @@
 //! Deformation models: the four calibration methods and the per-image paraboloid (SPEC §2).
-use crate::ffi::bridge::BoardModel;
-use crate::target::Target;
+use crate::model::target::Target;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 use std::fmt;
@@ -68,15 +67,6 @@ impl Method {
             Method::Static => 3,
             Method::Full => 2,
             _ => 0,
-        }
-    }
-
-    pub(crate) fn board_model(self) -> BoardModel {
-        match self {
-            Method::Standard => BoardModel::Standard,
-            Method::Static => BoardModel::Static,
-            Method::Dynamic => BoardModel::Dynamic,
-            Method::Full => BoardModel::Full,
         }
     }
 }

@@ -1,7 +1,7 @@
 //! The one cxx bridge between Rust and the Ceres core in `cpp/`.
 
 #[cxx::bridge(namespace = "deformcal::ffi")]
-pub mod bridge {
+pub mod ffi {
     /// Board model of the Ceres problem (SPEC §2).
     #[derive(Debug)]
     enum BoardModel {
@@ -112,8 +112,12 @@ pub mod bridge {
     }
 }
 
-impl Default for bridge::BoardModel {
+impl Default for ffi::BoardModel {
     fn default() -> Self {
-        bridge::BoardModel::Standard
+        ffi::BoardModel::Standard
     }
 }
+
+#[cfg(test)]
+#[path = "bridge_tests.rs"]
+mod tests;

@@ -1,5 +1,5 @@
 //! Calibration quality metrics (SPEC §3): mapping error, with and without a virtual rotation.
-use crate::camera::Intrinsics;
+use crate::model::camera::Intrinsics;
 use nalgebra::{Matrix3, Rotation3, Vector2, Vector3};
 
 /// Grid step of the mapping error in pixels.
@@ -87,6 +87,36 @@ pub fn mapping_error_rot(a: &Intrinsics, b: &Intrinsics, width: u32, height: u32
         }
     }
     best
+}
+
+/// Mean and sample standard deviation of a metric.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Stat {
+    pub mean: f64,
+    pub std: f64,
+    pub n: usize,
+}
+
+impl Stat {
+    /// Statistics of the finite values; `None` when there are none.
+    pub fn of(values: impl IntoIterator<Item = f64>) -> Option<Stat> {
+        let v: Vec<f64> = values.into_iter().filter(|x| x.is_finite()).collect();
+        if v.is_empty() {
+            return None;
+        }
+        let n = v.len() as f64;
+        let mean = v.iter().sum::<f64>() / n;
+        let std = if v.len() > 1 {
+            (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
+        } else {
+            0.0
+        };
+        Some(Stat {
+            mean,
+            std,
+            n: v.len(),
+        })
+    }
 }
 
 #[cfg(test)]

@@ -213,3 +213,18 @@ mod tests {
         assert_relative_eq!(p.inverse().transform(&p.transform(&x)), x, epsilon = 1e-12);
     }
 }
+
+/// A camera of the rig as the config describes it.
+#[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraSpec {
+    pub name: String,
+    pub width: u32,
+    pub height: u32,
+    #[serde(default = "default_model")]
+    pub model: String,
+}
+
+fn default_model() -> String {
+    "radial3".into()
+}

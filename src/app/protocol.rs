@@ -1,16 +1,17 @@
 //! The evaluation protocol (SPEC §3–4, the paper's section 4): reference calibration,
 //! reproducible subsets, every subset × method calibrated and measured, in parallel,
 //! sharded if asked.
-use crate::calibrate::{calibrate, Calibration, Request};
-use crate::camera::Intrinsics;
-use crate::config::{CameraSpec, Config, ProtocolConfig};
-use crate::deformation::{Method, Paraboloid};
+use crate::app::config::{Config, ProtocolConfig};
 use crate::error::{Error, Result};
-use crate::metrics::{mapping_error, mapping_error_rot};
-use crate::observations::Dataset;
-use crate::problem::{rmse, Hold, Problem, SolverSettings, State};
-use crate::synthetic::Truth;
-use crate::target::Target;
+use crate::model::board::{Method, Paraboloid};
+use crate::model::camera::CameraSpec;
+use crate::model::camera::Intrinsics;
+use crate::model::dataset::Dataset;
+use crate::model::metrics::{mapping_error, mapping_error_rot};
+use crate::model::synthetic::Truth;
+use crate::model::target::Target;
+use crate::solver::calibrate::{calibrate, Calibration, Request};
+use crate::solver::problem::{rmse, Hold, Problem, SolverSettings, State};
 use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
@@ -103,7 +104,7 @@ pub struct Row {
 pub struct CameraRow {
     pub intrinsics: Intrinsics,
     /// π_k: camera-k-from-camera-0.
-    pub pose: crate::camera::Pose,
+    pub pose: crate::model::camera::Pose,
     pub test_rmse_px: Option<f64>,
     pub mapping_error_px: Option<f64>,
     pub mapping_error_rot_px: Option<f64>,
@@ -159,7 +160,8 @@ pub struct Setup {
 
 /// Loads the data, runs the reference calibration and draws the subsets.
 pub fn prepare(config: &Config, protocol: &ProtocolConfig) -> Result<Setup> {
-    let (dataset, truth) = crate::load_source(&config.data, config.target, &config.cameras)?;
+    let (dataset, truth) =
+        crate::app::source::load_source(&config.data, config.target, &config.cameras)?;
     // One Ceres thread per solve: parallelism comes from running tasks side by side,
     // and single-threaded solves sum in a fixed order, so results are reproducible.
     let settings = SolverSettings {
@@ -169,7 +171,8 @@ pub fn prepare(config: &Config, protocol: &ProtocolConfig) -> Result<Setup> {
     let reference = match &config.reference {
         None => None,
         Some(r) => {
-            let (ref_data, _) = crate::load_source(&r.source, r.target, &config.cameras)?;
+            let (ref_data, _) =
+                crate::app::source::load_source(&r.source, r.target, &config.cameras)?;
             if ref_data.cameras.len() != dataset.cameras.len() {
                 return Err(Error::Invalid(format!(
                     "the reference set has {} camera(s) but the data has {}; set reference.cameras",
@@ -227,9 +230,9 @@ pub fn prepare(config: &Config, protocol: &ProtocolConfig) -> Result<Setup> {
 
 fn dataset_name(config: &Config) -> String {
     match &config.data {
-        crate::config::DataSource::Synthetic { preset, .. } => preset.name().to_string(),
-        crate::config::DataSource::Observations(p) => p.display().to_string(),
-        crate::config::DataSource::CornersVnl { path, .. } => path.display().to_string(),
+        crate::app::config::DataSource::Synthetic { preset, .. } => preset.name().to_string(),
+        crate::app::config::DataSource::Observations(p) => p.display().to_string(),
+        crate::app::config::DataSource::CornersVnl { path, .. } => path.display().to_string(),
     }
 }
 
@@ -244,7 +247,7 @@ pub fn test_rmse(
     settings: &SolverSettings,
 ) -> Result<f64> {
     let settings = &SolverSettings {
-        loss: crate::config::Loss::None,
+        loss: crate::solver::problem::Loss::None,
         ..settings.clone()
     };
     let r = &reference.dataset;
@@ -254,7 +257,7 @@ pub fn test_rmse(
             .observations
             .iter()
             .filter(|o| o.camera == k)
-            .map(|o| crate::observations::Observation { camera: 0, ..*o })
+            .map(|o| crate::model::dataset::Observation { camera: 0, ..*o })
             .collect(),
         ..r.clone()
     };
@@ -267,7 +270,7 @@ pub fn test_rmse(
     let pi = reference.state.camera_poses[k];
     let mut state = State {
         intrinsics: vec![*intrinsics],
-        camera_poses: vec![crate::camera::Pose::identity()],
+        camera_poses: vec![crate::model::camera::Pose::identity()],
         frame_poses: reference
             .state
             .frame_poses

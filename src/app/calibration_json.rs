@@ -1,33 +1,9 @@
-//! Result files: `calibration.json` (SPEC §5), written atomically.
-use crate::calibrate::{Calibration, Stage};
-use crate::camera::Intrinsics;
-use crate::deformation::Paraboloid;
-use crate::error::{Error, Result};
+//! The `calibration.json` schema (SPEC §5): what a calibration writes and what
+//! `export` and the C API read back.
+use crate::model::board::Paraboloid;
+use crate::model::camera::Intrinsics;
+use crate::solver::calibrate::{Calibration, Stage};
 use serde::{Deserialize, Serialize};
-use std::io::Write;
-use std::path::Path;
-
-/// Writes `bytes` to `path` through a temporary file and a rename, so a reader
-/// (or a crash) never sees a half-written file.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let dir = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(|e| Error::io(dir, e))?;
-    tmp.write_all(bytes).map_err(|e| Error::io(path, e))?;
-    tmp.as_file().sync_all().map_err(|e| Error::io(path, e))?;
-    // Temporary files are private; results are ordinary files.
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        let _ = tmp
-            .as_file()
-            .set_permissions(std::fs::Permissions::from_mode(0o644));
-    }
-    tmp.persist(path).map_err(|e| Error::io(path, e.error))?;
-    Ok(())
-}
 
 /// One camera in `calibration.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -166,58 +142,4 @@ impl From<&Calibration> for CalibrationJson {
             warnings: c.warnings.clone(),
         }
     }
-}
-
-/// Writes `calibration.json`, `opencv.yaml` and one `<camera>.cameramodel` per
-/// camera into `dir` (created if needed); returns the JSON's path.
-pub fn write_calibration(dir: &Path, c: &Calibration) -> Result<std::path::PathBuf> {
-    let path = write_models(dir, &CalibrationJson::from(c))?;
-    write_atomic(&dir.join("outliers.csv"), &suspects_csv(c)?)?;
-    Ok(path)
-}
-
-/// `outliers.csv`: the observations the robust loss down-weighted, worst first, so
-/// bad detections can be inspected.
-pub fn suspects_csv(c: &Calibration) -> Result<Vec<u8>> {
-    let mut w = csv::Writer::from_writer(Vec::new());
-    let suspects = c.suspects();
-    for s in &suspects {
-        w.serialize(s)
-            .map_err(|e| Error::Invalid(format!("outliers.csv: {e}")))?;
-    }
-    // serde writes the header with the first row; an empty report still gets one.
-    if suspects.is_empty() {
-        w.write_record([
-            "camera",
-            "frame",
-            "corner",
-            "u",
-            "v",
-            "residual_px",
-            "weight",
-        ])
-        .map_err(|e| Error::Invalid(format!("outliers.csv: {e}")))?;
-    }
-    w.into_inner()
-        .map_err(|e| Error::Invalid(format!("outliers.csv: {e}")))
-}
-
-/// Writes a calibration's JSON and its OpenCV and mrcal exports into `dir`.
-pub fn write_models(dir: &Path, json: &CalibrationJson) -> Result<std::path::PathBuf> {
-    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-    let text = serde_json::to_string_pretty(json).expect("calibration serialises");
-    write_atomic(
-        &dir.join("opencv.yaml"),
-        crate::interchange::opencv_yaml(json).as_bytes(),
-    )?;
-    for cam in &json.cameras {
-        let model = crate::interchange::mrcal_cameramodel(cam);
-        write_atomic(
-            &dir.join(crate::interchange::model_file_name(&cam.name)),
-            model.as_bytes(),
-        )?;
-    }
-    let path = dir.join("calibration.json");
-    write_atomic(&path, text.as_bytes())?;
-    Ok(path)
 }

@@ -1,9 +1,10 @@
 //! The C interface of libdeformcal (`include/deformcal.h`): calibrate from in-memory
 //! observations without files. Panics and errors become a non-zero return and a message.
 #![allow(unsafe_code)]
-use crate::config::{CameraSpec, Loss};
-use crate::problem::SolverSettings;
-use crate::synthetic::{Generator, Preset};
+use crate::model::camera::CameraSpec;
+use crate::model::synthetic::{Generator, Preset};
+use crate::solver::problem::Loss;
+use crate::solver::problem::SolverSettings;
 use crate::{calibrate, Dataset, Method, Request, Target};
 use std::ffi::{c_char, CStr};
 use std::panic::{catch_unwind, AssertUnwindSafe};

@@ -1,5 +1,5 @@
 //! Invalid values reaching the C++ core come back as errors, never as aborts.
-use deformcal::ffi::bridge::{self, BoardModel, LossKind, ProblemData, SolveOptions};
+use super::ffi::{self as bridge, BoardModel, LossKind, ProblemData, SolveOptions};
 
 fn options() -> SolveOptions {
     SolveOptions {

@@ -1,8 +1,8 @@
 //! SVG plots of protocol results (plotters): strip charts per method and the
 //! deformation surface of one image (the paper's Fig. 1).
-use crate::deformation::Paraboloid;
 use crate::error::{Error, Result};
-use crate::target::Target;
+use crate::model::board::Paraboloid;
+use crate::model::target::Target;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::Path;
@@ -34,7 +34,7 @@ fn plot_err<E: std::fmt::Debug>(path: &Path) -> impl Fn(E) -> Error + '_ {
 }
 
 fn mean_std(v: &[f64]) -> Option<(f64, f64)> {
-    crate::protocol_report::Stat::of(v.iter().copied()).map(|s| (s.mean, s.std))
+    crate::model::metrics::Stat::of(v.iter().copied()).map(|s| (s.mean, s.std))
 }
 
 fn value_range(series: &[Series], lines: &[HLine]) -> (f64, f64) {

@@ -1,12 +1,12 @@
 //! The calibration pipeline: Zhang initialisation → `standard` → the chosen method.
-use crate::camera::{Intrinsics, Pose};
-use crate::deformation::Method;
 use crate::error::{Error, Result};
-use crate::observations::Dataset;
-use crate::problem::{
+use crate::model::board::Method;
+use crate::model::camera::{Intrinsics, Pose};
+use crate::model::dataset::Dataset;
+use crate::model::zhang;
+use crate::solver::problem::{
     choose_gauge, rmse, underobserved_corners, Hold, Problem, SolveReport, SolverSettings, State,
 };
-use crate::zhang;
 use nalgebra::{Matrix3, Vector2};
 use std::collections::HashMap;
 use std::time::Instant;
@@ -111,7 +111,7 @@ impl Calibration {
     /// Observations the Cauchy loss weighted below one half (residual above its
     /// scale), or without a loss those beyond three times the RMSE; worst first.
     pub fn suspects(&self) -> Vec<Suspect> {
-        let cauchy = self.settings.loss == crate::config::Loss::Cauchy;
+        let cauchy = self.settings.loss == crate::solver::problem::Loss::Cauchy;
         let a = self.settings.loss_scale_px;
         let mut out: Vec<Suspect> = self
             .dataset
@@ -366,7 +366,7 @@ fn initialise(dataset: &Dataset, warnings: &mut Vec<String>) -> Result<(Dataset,
         intrinsics.push(kk);
     }
     let names: Vec<String> = dataset.cameras.iter().map(|c| c.name.clone()).collect();
-    let rig = crate::rig::initial_rig(&views, &names)?;
+    let rig = crate::model::rig::initial_rig(&views, &names)?;
     // Π_j from the camera that sees most of the board in frame j.
     let mut counts = vec![vec![0usize; dataset.num_frames()]; cameras];
     for o in &dataset.observations {

@@ -1,5 +1,5 @@
 //! The short human summary printed after a calibration.
-use crate::calibrate::Calibration;
+use crate::solver::calibrate::Calibration;
 use std::fmt::Write;
 
 /// Method, RMSE, intrinsics, deformation, iterations and time, as a few lines of text.

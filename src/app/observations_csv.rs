@@ -1,0 +1,178 @@
+//! The observations CSV (SPEC §5, `camera,frame,corner,u,v`): reading with a
+//! message naming the line of every problem, and writing.
+use crate::app::fsio::write_atomic;
+use crate::error::{Error, Result};
+use crate::model::camera::CameraSpec;
+use crate::model::dataset::{Dataset, HEADER};
+use crate::model::target::Target;
+use std::collections::{BTreeMap, HashMap, HashSet};
+use std::path::Path;
+
+/// Reads an observations CSV; every problem is reported with its line.
+pub fn read(path: &Path, target: Target, cameras: Vec<CameraSpec>) -> Result<Dataset> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    parse(&bytes, path, target, cameras)
+}
+
+/// Parses observations CSV bytes; `path` names the source in messages.
+pub fn parse(
+    bytes: &[u8],
+    path: &Path,
+    target: Target,
+    cameras: Vec<CameraSpec>,
+) -> Result<Dataset> {
+    let err = |line: u64, message: String| Error::Data {
+        path: path.into(),
+        line,
+        message,
+    };
+    if bytes.is_empty() {
+        return Err(err(
+            1,
+            "the file is empty; expected the header camera,frame,corner,u,v".into(),
+        ));
+    }
+    if bytes.contains(&0) {
+        return Err(err(
+            1,
+            "this is a binary file, not an observations CSV".into(),
+        ));
+    }
+    let mut reader = csv::ReaderBuilder::new()
+        .has_headers(true)
+        .flexible(true)
+        .trim(csv::Trim::All)
+        .from_reader(bytes);
+    let header = reader
+        .headers()
+        .map_err(|e| err(1, format!("unreadable header: {e}")))?;
+    if header.iter().collect::<Vec<_>>() != HEADER {
+        return Err(err(
+            1,
+            format!(
+                "bad header `{}`; expected `{}`",
+                header.iter().collect::<Vec<_>>().join(","),
+                HEADER.join(",")
+            ),
+        ));
+    }
+    let names: HashMap<&str, usize> = cameras
+        .iter()
+        .enumerate()
+        .map(|(i, c)| (c.name.as_str(), i))
+        .collect();
+    let mut seen = HashSet::new();
+    let mut rows = Vec::new();
+    let mut record = csv::StringRecord::new();
+    loop {
+        let line = reader.position().line() + 1;
+        match reader.read_record(&mut record) {
+            Ok(false) => break,
+            Ok(true) => {}
+            Err(e) => return Err(err(line, format!("unreadable CSV record: {e}"))),
+        }
+        let line = record.position().map(|p| p.line()).unwrap_or(line);
+        if record.len() != HEADER.len() {
+            return Err(err(
+                line,
+                format!(
+                    "expected 5 fields (camera,frame,corner,u,v), found {}",
+                    record.len()
+                ),
+            ));
+        }
+        let camera = *names.get(&record[0]).ok_or_else(|| {
+            err(
+                line,
+                format!(
+                    "unknown camera `{}` (the config names: {})",
+                    short(&record[0]),
+                    cameras
+                        .iter()
+                        .map(|c| c.name.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            )
+        })?;
+        let frame: i64 = record[1].parse().map_err(|_| {
+            err(
+                line,
+                format!("frame `{}` is not an integer", short(&record[1])),
+            )
+        })?;
+        let corner: usize = record[2].parse().map_err(|_| {
+            err(
+                line,
+                format!(
+                    "corner `{}` is not a non-negative integer",
+                    short(&record[2])
+                ),
+            )
+        })?;
+        if corner >= target.num_corners() {
+            return Err(err(
+                line,
+                format!(
+                    "corner {corner} is outside the {} × {} board (0..{})",
+                    target.rows,
+                    target.cols,
+                    target.num_corners() - 1
+                ),
+            ));
+        }
+        let mut uv = [0.0; 2];
+        for (k, name) in [(3, "u"), (4, "v")] {
+            let v: f64 = record[k].parse().map_err(|_| {
+                err(
+                    line,
+                    format!("{name} `{}` is not a number", short(&record[k])),
+                )
+            })?;
+            if !v.is_finite() {
+                return Err(err(line, format!("{name} is not finite ({v})")));
+            }
+            uv[k - 3] = v;
+        }
+        if !seen.insert((camera, frame, corner)) {
+            return Err(err(
+                line,
+                format!(
+                    "duplicate observation of camera {}, frame {frame}, corner {corner}",
+                    cameras[camera].name
+                ),
+            ));
+        }
+        rows.push((camera, frame, corner, uv));
+    }
+    if rows.is_empty() {
+        return Err(err(1, "the file has a header but no observations".into()));
+    }
+    Ok(Dataset::from_keyed(target, cameras, rows))
+}
+
+/// Writes the observations CSV atomically, sorted by camera, frame and corner.
+pub fn write(dataset: &Dataset, path: &Path) -> Result<()> {
+    let d = dataset;
+    let mut sorted: BTreeMap<(usize, i64, usize), [f64; 2]> = BTreeMap::new();
+    for o in &d.observations {
+        sorted.insert((o.camera, d.frame_ids[o.frame], o.corner), o.uv);
+    }
+    let mut text = String::with_capacity(40 * sorted.len() + 32);
+    text.push_str(&HEADER.join(","));
+    text.push('\n');
+    for ((camera, frame, corner), uv) in sorted {
+        let name = &d.cameras[camera].name;
+        text.push_str(&format!("{name},{frame},{corner},{},{}\n", uv[0], uv[1]));
+    }
+    write_atomic(path, text.as_bytes())
+}
+
+/// A field cut to a readable length for an error message.
+fn short(s: &str) -> String {
+    if s.chars().count() > 40 {
+        format!("{}…", s.chars().take(40).collect::<String>())
+    } else {
+        s.to_string()
+    }
+}

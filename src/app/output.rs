@@ -1,0 +1,62 @@
+//! The result files of one calibration: `calibration.json`, its exports and
+//! `outliers.csv`, each written atomically into the output directory.
+use crate::app::calibration_json::CalibrationJson;
+use crate::app::exports;
+use crate::app::fsio::write_atomic;
+use crate::error::{Error, Result};
+use crate::solver::calibrate::Calibration;
+use std::path::Path;
+
+/// Writes `calibration.json`, `opencv.yaml` and one `<camera>.cameramodel` per
+/// camera into `dir` (created if needed); returns the JSON's path.
+pub fn write_calibration(dir: &Path, c: &Calibration) -> Result<std::path::PathBuf> {
+    let path = write_models(dir, &CalibrationJson::from(c))?;
+    write_atomic(&dir.join("outliers.csv"), &suspects_csv(c)?)?;
+    Ok(path)
+}
+
+/// `outliers.csv`: the observations the robust loss down-weighted, worst first, so
+/// bad detections can be inspected.
+pub fn suspects_csv(c: &Calibration) -> Result<Vec<u8>> {
+    let mut w = csv::Writer::from_writer(Vec::new());
+    let suspects = c.suspects();
+    for s in &suspects {
+        w.serialize(s)
+            .map_err(|e| Error::Invalid(format!("outliers.csv: {e}")))?;
+    }
+    // serde writes the header with the first row; an empty report still gets one.
+    if suspects.is_empty() {
+        w.write_record([
+            "camera",
+            "frame",
+            "corner",
+            "u",
+            "v",
+            "residual_px",
+            "weight",
+        ])
+        .map_err(|e| Error::Invalid(format!("outliers.csv: {e}")))?;
+    }
+    w.into_inner()
+        .map_err(|e| Error::Invalid(format!("outliers.csv: {e}")))
+}
+
+/// Writes a calibration's JSON and its OpenCV and mrcal exports into `dir`.
+pub fn write_models(dir: &Path, json: &CalibrationJson) -> Result<std::path::PathBuf> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    let text = serde_json::to_string_pretty(json).expect("calibration serialises");
+    write_atomic(
+        &dir.join("opencv.yaml"),
+        exports::opencv_yaml(json).as_bytes(),
+    )?;
+    for cam in &json.cameras {
+        let model = exports::mrcal_cameramodel(cam);
+        write_atomic(
+            &dir.join(exports::model_file_name(&cam.name)),
+            model.as_bytes(),
+        )?;
+    }
+    let path = dir.join("calibration.json");
+    write_atomic(&path, text.as_bytes())?;
+    Ok(path)
+}

@@ -1,0 +1,52 @@
+//! Where a dataset comes from: an observations CSV, mrgingham's corners.vnl or a
+//! built-in synthetic preset; and writing a generated preset to disk.
+use crate::app::config::DataSource;
+use crate::app::fsio::write_atomic;
+use crate::app::{corners_vnl, observations_csv};
+use crate::error::Result;
+use crate::model::camera::CameraSpec;
+use crate::model::dataset::Dataset;
+use crate::model::synthetic::{self, Truth};
+use crate::model::target::Target;
+use std::path::Path;
+
+/// Loads the dataset a data source names, for the given board and cameras.
+pub fn load_source(
+    source: &DataSource,
+    target: Target,
+    cameras: &[CameraSpec],
+) -> Result<(Dataset, Option<synthetic::Truth>)> {
+    match source {
+        DataSource::Observations(path) => Ok((
+            observations_csv::read(path, target, cameras.to_vec())?,
+            None,
+        )),
+        DataSource::CornersVnl { path, patterns } => {
+            let (d, _) = corners_vnl::read_corners_vnl(path, target, cameras.to_vec(), patterns)?;
+            Ok((d, None))
+        }
+        DataSource::Synthetic {
+            preset,
+            images,
+            seed,
+            cameras: n,
+        } => {
+            let (mut d, t) = synthetic::Generator::new(*preset, *images, *seed)
+                .with_cameras(*n)
+                .generate();
+            // The config may rename the simulated cameras.
+            for (spec, given) in d.cameras.iter_mut().zip(cameras) {
+                spec.name = given.name.clone();
+            }
+            Ok((d, Some(t)))
+        }
+    }
+}
+
+/// Writes `observations.csv` and `truth.json` into `dir`.
+pub fn write_preset(dir: &Path, dataset: &Dataset, truth: &Truth) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| crate::error::Error::io(dir, e))?;
+    observations_csv::write(dataset, &dir.join("observations.csv"))?;
+    let json = serde_json::to_string_pretty(truth).expect("truth serialises");
+    write_atomic(&dir.join("truth.json"), json.as_bytes())
+}

@@ -1,0 +1,10 @@
+//! The model layer: the mathematics of calibration, pure Rust. No file I/O, no
+//! C++; everything here can be tested and reused without the solver.
+pub mod board;
+pub mod camera;
+pub mod dataset;
+pub mod metrics;
+pub mod rig;
+pub mod synthetic;
+pub mod target;
+pub mod zhang;
