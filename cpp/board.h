@@ -1,15 +1,18 @@
 // Board models: where corner i sits on the (possibly deformed) board of image j.
 //
-// Each model is one struct: how many parameters it adds per image and per
-// corner, the templated board point, and the gauge it must hold fixed.  The
-// reprojection functor and the problem assembly are generic over these structs,
-// so a new deformation model is one more struct here and one switch case.
+// Each model is one struct: its name (the method's, SPEC 2), how many
+// parameters it adds per frame and per corner, the templated board point, and
+// the gauge it must hold fixed.  The reprojection functor and the problem
+// assembly are generic over these structs, so a new board model is one more
+// struct here and one line in DispatchBoard; the Rust registry
+// (src/model/board.rs) describes the same sizes and a test checks they agree.
 #pragma once
 
 #include <ceres/manifold.h>
 #include <ceres/problem.h>
 
 #include <cstdint>
+#include <string>
 #include <vector>
 
 namespace deformcal {
@@ -31,6 +34,8 @@ inline T Paraboloid(const double* x, const T* abc) {
 
 // Rigid, perfectly planar board.
 struct StandardBoard {
+  static constexpr const char* kName = "standard";
+  static constexpr int kGaugeCorners = 0;
   static constexpr int kFrameExtra = 0;
   static constexpr int kCornerSize = 0;
 
@@ -45,6 +50,8 @@ struct StandardBoard {
 
 // One 3D correction per corner for the whole dataset (Strobl & Hirzinger).
 struct StaticBoard {
+  static constexpr const char* kName = "static";
+  static constexpr int kGaugeCorners = 3;
   static constexpr int kFrameExtra = 0;
   static constexpr int kCornerSize = 3;
 
@@ -66,6 +73,8 @@ struct StaticBoard {
 
 // A paraboloid out-of-plane bend per image (the paper's dynamic model).
 struct DynamicBoard {
+  static constexpr const char* kName = "dynamic";
+  static constexpr int kGaugeCorners = 0;
   static constexpr int kFrameExtra = kParaboloidSize;
   static constexpr int kCornerSize = 0;
 
@@ -80,6 +89,8 @@ struct DynamicBoard {
 
 // Static in-plane correction per corner plus the per-image paraboloid.
 struct FullBoard {
+  static constexpr const char* kName = "full";
+  static constexpr int kGaugeCorners = 2;
   static constexpr int kFrameExtra = kParaboloidSize;
   static constexpr int kCornerSize = 2;
 
@@ -96,5 +107,23 @@ struct FullBoard {
     problem.SetParameterBlockConstant(corrections + kCorrectionStride * gauge[1]);
   }
 };
+
+// The board-model registry: DispatchBoard calls f with the model whose kName
+// matches, or returns false.
+template <class F>
+bool DispatchBoard(const std::string& name, F&& f) {
+  bool found = false;
+  auto try_one = [&](auto board) {
+    if (!found && name == decltype(board)::kName) {
+      found = true;
+      f(board);
+    }
+  };
+  try_one(StandardBoard{});
+  try_one(StaticBoard{});
+  try_one(DynamicBoard{});
+  try_one(FullBoard{});
+  return found;
+}
 
 }  // namespace deformcal

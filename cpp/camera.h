@@ -5,13 +5,14 @@
 #include <ceres/rotation.h>
 
 #include <cmath>
+#include <string>
 
 namespace deformcal {
 
-// Number of intrinsic parameters of the radial3 model: fx, fy, cx, cy, k1, k2, k3.
-constexpr int kIntrinsicsSize = 7;
 // Angle-axis rotation followed by translation.
 constexpr int kPoseSize = 6;
+// The largest lens model's parameter count: the stride of intrinsics tables.
+constexpr int kMaxLensParams = 12;
 
 // x_out = R(pose[0..3]) * x + pose[3..6]
 template <typename T>
@@ -22,15 +23,136 @@ inline void TransformPoint(const T* pose, const T* x, T* x_out) {
   x_out[2] += pose[5];
 }
 
-// The paper's radial3 lens model, identical to OpenCV's with p1 = p2 = 0 (SPEC 1).
+// Lens models (SPEC 1).  Each is one struct: its config name, its parameter
+// count and one templated projection from a camera-frame point to a pixel, used
+// by every residual.  The Rust registry (src/model/lens.rs) describes the same
+// models and a test checks that both projections agree.  Project returns false
+// where the model has no valid image of the point.
+
+// The paper's radial3 model: OpenCV's with p1 = p2 = 0.
+struct Radial3 {
+  static constexpr const char* kName = "radial3";
+  static constexpr int kNumParams = 7;  // fx fy cx cy k1 k2 k3
+  template <typename T>
+  static bool Project(const T* p, const T* xc, T* uv) {
+    const T xn = xc[0] / xc[2];
+    const T yn = xc[1] / xc[2];
+    const T r2 = xn * xn + yn * yn;
+    const T d = T(1.0) + r2 * (p[4] + r2 * (p[5] + r2 * p[6]));
+    uv[0] = p[0] * xn * d + p[2];
+    uv[1] = p[1] * yn * d + p[3];
+    return true;
+  }
+};
+
+// OpenCV's tangential terms (p1 = p[6], p2 = p[7]) on top of a radial factor d.
 template <typename T>
-inline void ProjectRadial3(const T* intrinsics, const T* xc, T* uv) {
-  const T xn = xc[0] / xc[2];
-  const T yn = xc[1] / xc[2];
-  const T r2 = xn * xn + yn * yn;
-  const T d = T(1.0) + r2 * (intrinsics[4] + r2 * (intrinsics[5] + r2 * intrinsics[6]));
-  uv[0] = intrinsics[0] * xn * d + intrinsics[2];
-  uv[1] = intrinsics[1] * yn * d + intrinsics[3];
+inline void OpenCvDistort(const T* p, const T& d, const T& xn, const T& yn, const T& r2, T* uv) {
+  const T& p1 = p[6];
+  const T& p2 = p[7];
+  const T xy = xn * yn;
+  const T xd = xn * d + T(2.0) * p1 * xy + p2 * (r2 + T(2.0) * xn * xn);
+  const T yd = yn * d + p1 * (r2 + T(2.0) * yn * yn) + T(2.0) * p2 * xy;
+  uv[0] = p[0] * xd + p[2];
+  uv[1] = p[1] * yd + p[3];
+}
+
+// OpenCV's default five-coefficient model (ROS plumb_bob).
+struct OpenCv5 {
+  static constexpr const char* kName = "opencv5";
+  static constexpr int kNumParams = 9;  // fx fy cx cy k1 k2 p1 p2 k3
+  template <typename T>
+  static bool Project(const T* p, const T* xc, T* uv) {
+    const T xn = xc[0] / xc[2];
+    const T yn = xc[1] / xc[2];
+    const T r2 = xn * xn + yn * yn;
+    const T d = T(1.0) + r2 * (p[4] + r2 * (p[5] + r2 * p[8]));
+    OpenCvDistort(p, d, xn, yn, r2, uv);
+    return true;
+  }
+};
+
+// OpenCV's rational model (CALIB_RATIONAL_MODEL, ROS rational_polynomial).
+struct OpenCv8 {
+  static constexpr const char* kName = "opencv8";
+  static constexpr int kNumParams = 12;  // fx fy cx cy k1 k2 p1 p2 k3 k4 k5 k6
+  template <typename T>
+  static bool Project(const T* p, const T* xc, T* uv) {
+    const T xn = xc[0] / xc[2];
+    const T yn = xc[1] / xc[2];
+    const T r2 = xn * xn + yn * yn;
+    const T num = T(1.0) + r2 * (p[4] + r2 * (p[5] + r2 * p[8]));
+    const T den = T(1.0) + r2 * (p[9] + r2 * (p[10] + r2 * p[11]));
+    OpenCvDistort(p, num / den, xn, yn, r2, uv);
+    return true;
+  }
+};
+
+// Kannala-Brandt equidistant fisheye (OpenCV fisheye, Kalibr pinhole-equi).
+struct Kb4 {
+  static constexpr const char* kName = "kb4";
+  static constexpr int kNumParams = 8;  // fx fy cx cy k1 k2 k3 k4
+  template <typename T>
+  static bool Project(const T* p, const T* xc, T* uv) {
+    using std::atan2;
+    using std::sqrt;
+    const T r2 = xc[0] * xc[0] + xc[1] * xc[1];
+    T xd, yd;
+    // On the axis theta_d / r tends to 1 / z; sqrt has no derivative at 0.
+    if (r2 < T(1e-30) * xc[2] * xc[2]) {
+      xd = xc[0] / xc[2];
+      yd = xc[1] / xc[2];
+    } else {
+      const T r = sqrt(r2);
+      const T theta = atan2(r, xc[2]);
+      const T t2 = theta * theta;
+      const T theta_d = theta * (T(1.0) + t2 * (p[4] + t2 * (p[5] + t2 * (p[6] + t2 * p[7]))));
+      const T s = theta_d / r;
+      xd = xc[0] * s;
+      yd = xc[1] * s;
+    }
+    uv[0] = p[0] * xd + p[2];
+    uv[1] = p[1] * yd + p[3];
+    return true;
+  }
+};
+
+// Double sphere (Usenko, Demmel, Cremers 2018); fields of view beyond 180 degrees.
+struct DoubleSphere {
+  static constexpr const char* kName = "ds";
+  static constexpr int kNumParams = 6;  // fx fy cx cy xi alpha
+  template <typename T>
+  static bool Project(const T* p, const T* xc, T* uv) {
+    using std::sqrt;
+    const T& xi = p[4];
+    const T& alpha = p[5];
+    const T d1 = sqrt(xc[0] * xc[0] + xc[1] * xc[1] + xc[2] * xc[2]);
+    const T zz = xi * d1 + xc[2];
+    const T d2 = sqrt(xc[0] * xc[0] + xc[1] * xc[1] + zz * zz);
+    const T m = alpha * d2 + (T(1.0) - alpha) * zz;
+    uv[0] = p[0] * xc[0] / m + p[2];
+    uv[1] = p[1] * xc[1] / m + p[3];
+    return true;
+  }
+};
+
+// The lens registry: every model once.  DispatchLens calls f with a
+// default-constructed model struct whose kName matches, or returns false.
+template <class F>
+bool DispatchLens(const std::string& name, F&& f) {
+  bool found = false;
+  auto try_one = [&](auto lens) {
+    if (!found && name == decltype(lens)::kName) {
+      found = true;
+      f(lens);
+    }
+  };
+  try_one(Radial3{});
+  try_one(OpenCv5{});
+  try_one(OpenCv8{});
+  try_one(Kb4{});
+  try_one(DoubleSphere{});
+  return found;
 }
 
 // x_out = R x + t for a double pose, with R and dx_out/dω (both row-major 3x3);

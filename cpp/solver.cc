@@ -1,4 +1,7 @@
-// Ceres problem assembly and solving for all board models and camera rigs.
+// Ceres problem assembly and solving: turns the bridge's ProblemData into a
+// ceres::Problem over one parameter buffer (laid out by the Rust side, see
+// src/model/state.rs), chooses the linear solver, solves and evaluates.  The
+// residual functors live in residuals.h, the models in camera.h and board.h.
 #include "deformcal/cpp/bridge.h"
 
 #include <ceres/ceres.h>
@@ -17,297 +20,11 @@
 #include <utility>
 #include <vector>
 
-#include "deformcal/cpp/board.h"
-#include "deformcal/cpp/camera.h"
+#include "deformcal/cpp/residuals.h"
 #include "deformcal/src/solver/bridge.rs.h"
 
 namespace deformcal {
 namespace {
-
-template <class A, class B>
-struct Concat;
-template <int... A, int... B>
-struct Concat<std::integer_sequence<int, A...>, std::integer_sequence<int, B...>> {
-  using type = std::integer_sequence<int, A..., B...>;
-};
-
-// Residual of one observed corner.  Blocks: intrinsics, [camera-k-from-camera-0
-// if kRig], the image's block (camera-0-from-board pose followed by the model's
-// per-image parameters), then the corner's correction if the model has one.
-template <class Board, bool kRig>
-class ReprojectionError {
- public:
-  ReprojectionError(double u, double v, double w, const double* x)
-      : u_(u), v_(v), w_(w), x_{x[0], x[1], x[2]} {}
-
-  template <typename T>
-  bool operator()(const T* const p0, const T* const p1, T* r) const {
-    const T* const p[] = {p0, p1};
-    return Evaluate(p, r);
-  }
-  template <typename T>
-  bool operator()(const T* const p0, const T* const p1, const T* const p2, T* r) const {
-    const T* const p[] = {p0, p1, p2};
-    return Evaluate(p, r);
-  }
-  template <typename T>
-  bool operator()(const T* const p0, const T* const p1, const T* const p2, const T* const p3,
-                  T* r) const {
-    const T* const p[] = {p0, p1, p2, p3};
-    return Evaluate(p, r);
-  }
-
-  // w scales the residual: 1 for a full-resolution detection, 0.5^level for a
-  // corner found on a decimated image.
-  static ceres::CostFunction* Create(double u, double v, double w, const double* x) {
-    return Make(new ReprojectionError(u, v, w, x), BlockSizes{});
-  }
-
- private:
-  static constexpr int kFrame = kRig ? 2 : 1;
-  static constexpr int kFrameSize = kPoseSize + Board::kFrameExtra;
-  using LeadingSizes =
-      std::conditional_t<kRig, std::integer_sequence<int, kIntrinsicsSize, kPoseSize, kFrameSize>,
-                         std::integer_sequence<int, kIntrinsicsSize, kFrameSize>>;
-  using BlockSizes = std::conditional_t<
-      Board::kCornerSize == 0, LeadingSizes,
-      typename Concat<LeadingSizes, std::integer_sequence<int, Board::kCornerSize>>::type>;
-
-  template <int... Ns>
-  static ceres::CostFunction* Make(ReprojectionError* f, std::integer_sequence<int, Ns...>) {
-    return new ceres::AutoDiffCostFunction<ReprojectionError, 2, Ns...>(f);
-  }
-
-  template <typename T>
-  bool Evaluate(const T* const* p, T* r) const {
-    const T* frame = p[kFrame];
-    const T* corner = Board::kCornerSize > 0 ? p[kFrame + 1] : nullptr;
-    T board[3];
-    Board::Point(x_, frame + kPoseSize, corner, board);
-    T xc[3];
-    TransformPoint(frame, board, xc);
-    if constexpr (kRig) {
-      T xk[3];
-      TransformPoint(p[1], xc, xk);
-      xc[0] = xk[0];
-      xc[1] = xk[1];
-      xc[2] = xk[2];
-    }
-    T uv[2];
-    ProjectRadial3(p[0], xc, uv);
-    r[0] = w_ * (T(u_) - uv[0]);
-    r[1] = w_ * (T(v_) - uv[1]);
-    return true;
-  }
-
-  double u_, v_, w_;
-  double x_[3];
-};
-
-// The same residual with its Jacobian assembled by the chain rule from three
-// pieces: the board point (Jets over the model's own parameters), the rigid
-// transform (closed form; d/dX is the rotation matrix), and the projection (Jets
-// over intrinsics and the camera point).  The Jets carry 3 to 10 derivatives
-// instead of up to 21, which makes the Jacobian several times cheaper;
-// ReprojectionError stays as the reference it is tested against.
-template <class Board, bool kRig>
-class ChainedReprojection final : public ceres::CostFunction {
- public:
-  static constexpr int kFrameSize = kPoseSize + Board::kFrameExtra;
-  static constexpr int kModel = Board::kFrameExtra + Board::kCornerSize;
-
-  ChainedReprojection(double u, double v, double w, const double* x)
-      : u_(u), v_(v), w_(w), x_{x[0], x[1], x[2]} {
-    set_num_residuals(2);
-    auto* sizes = mutable_parameter_block_sizes();
-    sizes->push_back(kIntrinsicsSize);
-    if (kRig) sizes->push_back(kPoseSize);
-    sizes->push_back(kFrameSize);
-    if (Board::kCornerSize > 0) sizes->push_back(Board::kCornerSize);
-  }
-
-  bool Evaluate(double const* const* p, double* r, double** jacobians) const override {
-    const double* intrinsics = p[0];
-    const double* rig = kRig ? p[1] : nullptr;
-    const double* frame = p[kRig ? 2 : 1];
-    const double* corner = Board::kCornerSize > 0 ? p[kRig ? 3 : 2] : nullptr;
-
-    // Board point X and dX/d(frame extra, corner).
-    double X[3];
-    double dX[3][kModel > 0 ? kModel : 1] = {};
-    if constexpr (kModel > 0) {
-      using JM = ceres::Jet<double, kModel>;
-      JM extra[Board::kFrameExtra > 0 ? Board::kFrameExtra : 1];
-      JM corr[Board::kCornerSize > 0 ? Board::kCornerSize : 1];
-      for (int e = 0; e < Board::kFrameExtra; ++e) extra[e] = JM(frame[kPoseSize + e], e);
-      for (int c = 0; c < Board::kCornerSize; ++c) corr[c] = JM(corner[c], Board::kFrameExtra + c);
-      JM out[3];
-      Board::Point(x_, extra, corr, out);
-      for (int i = 0; i < 3; ++i) {
-        X[i] = out[i].a;
-        for (int k = 0; k < kModel; ++k) dX[i][k] = out[i].v[k];
-      }
-    } else {
-      Board::Point(x_, static_cast<const double*>(nullptr), static_cast<const double*>(nullptr), X);
-    }
-
-    if (jacobians == nullptr) {
-      double xc[3], uv[2];
-      TransformPoint(frame, X, xc);
-      if (kRig) {
-        double xk[3];
-        TransformPoint(rig, xc, xk);
-        std::copy(xk, xk + 3, xc);
-      }
-      ProjectRadial3(intrinsics, xc, uv);
-      r[0] = w_ * (u_ - uv[0]);
-      r[1] = w_ * (v_ - uv[1]);
-      return true;
-    }
-
-    // xc = R X + t, its pose derivatives in closed form; dxc/dX = R.
-    double xc[3], R[9], dxc_dw[9];
-    TransformPointWithJacobian(frame, X, xc, R, dxc_dw);
-
-    // Rig: xk = R_k xc + t_k; dxk/dxc = R_k.
-    double cam[3] = {xc[0], xc[1], xc[2]};
-    double dcam_dxc[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
-    double dcam_drig[3][kPoseSize] = {};
-    if (kRig) {
-      double dk_dw[9];
-      TransformPointWithJacobian(rig, xc, cam, dcam_dxc, dk_dw);
-      for (int i = 0; i < 3; ++i) {
-        for (int j = 0; j < 3; ++j) dcam_drig[i][j] = dk_dw[3 * i + j];
-        dcam_drig[i][3 + i] = 1.0;
-      }
-    }
-
-    // Projection: Jets over intrinsics and the camera point.
-    using JP = ceres::Jet<double, kIntrinsicsSize + 3>;
-    JP ij[kIntrinsicsSize], pc[3], uv[2];
-    for (int i = 0; i < kIntrinsicsSize; ++i) ij[i] = JP(intrinsics[i], i);
-    for (int i = 0; i < 3; ++i) pc[i] = JP(cam[i], kIntrinsicsSize + i);
-    ProjectRadial3(ij, pc, uv);
-    r[0] = w_ * (u_ - uv[0].a);
-    r[1] = w_ * (v_ - uv[1].a);
-
-    // dr/dcam (2x3) and dr/dxc = dr/dcam * dcam/dxc.
-    double dr_dcam[2][3], dr_dxc[2][3];
-    for (int k = 0; k < 2; ++k) {
-      for (int c = 0; c < 3; ++c) dr_dcam[k][c] = -w_ * uv[k].v[kIntrinsicsSize + c];
-      for (int c = 0; c < 3; ++c) {
-        dr_dxc[k][c] = dr_dcam[k][0] * dcam_dxc[c] + dr_dcam[k][1] * dcam_dxc[3 + c] +
-                       dr_dcam[k][2] * dcam_dxc[6 + c];
-      }
-    }
-    int b = 0;
-    if (double* J = jacobians[b++]) {
-      for (int k = 0; k < 2; ++k)
-        for (int i = 0; i < kIntrinsicsSize; ++i) J[k * kIntrinsicsSize + i] = -w_ * uv[k].v[i];
-    }
-    if (kRig) {
-      if (double* J = jacobians[b]) {
-        for (int k = 0; k < 2; ++k)
-          for (int j = 0; j < kPoseSize; ++j)
-            J[k * kPoseSize + j] = dr_dcam[k][0] * dcam_drig[0][j] + dr_dcam[k][1] * dcam_drig[1][j] +
-                                   dr_dcam[k][2] * dcam_drig[2][j];
-      }
-      ++b;
-    }
-    // dr/dX = dr/dxc * R, used for the model's parameters.
-    double dr_dX[2][3];
-    for (int k = 0; k < 2; ++k)
-      for (int m = 0; m < 3; ++m)
-        dr_dX[k][m] = dr_dxc[k][0] * R[m] + dr_dxc[k][1] * R[3 + m] + dr_dxc[k][2] * R[6 + m];
-    if (double* J = jacobians[b]) {
-      for (int k = 0; k < 2; ++k) {
-        for (int j = 0; j < 3; ++j) {
-          J[k * kFrameSize + j] = dr_dxc[k][0] * dxc_dw[j] + dr_dxc[k][1] * dxc_dw[3 + j] +
-                                  dr_dxc[k][2] * dxc_dw[6 + j];
-          J[k * kFrameSize + 3 + j] = dr_dxc[k][j];
-        }
-        for (int e = 0; e < Board::kFrameExtra; ++e) {
-          J[k * kFrameSize + kPoseSize + e] =
-              dr_dX[k][0] * dX[0][e] + dr_dX[k][1] * dX[1][e] + dr_dX[k][2] * dX[2][e];
-        }
-      }
-    }
-    ++b;
-    if (Board::kCornerSize > 0) {
-      if (double* J = jacobians[b]) {
-        for (int k = 0; k < 2; ++k)
-          for (int c = 0; c < Board::kCornerSize; ++c) {
-            const int m = Board::kFrameExtra + c;
-            J[k * Board::kCornerSize + c] =
-                dr_dX[k][0] * dX[0][m] + dr_dX[k][1] * dX[1][m] + dr_dX[k][2] * dX[2][m];
-          }
-      }
-    }
-    return true;
-  }
-
- private:
-  double u_, v_, w_;
-  double x_[3];
-};
-
-// Residuals of the corners of one view when only the board pose is free (a
-// test-error refit): board points, intrinsics and rig pose are constants, the
-// rotation is applied once per view, and the Jets carry 6 derivatives.  Without
-// a robust loss one block holds a whole view; with one, a single corner.
-class ViewPoseError {
- public:
-  ViewPoseError(const double* intrinsics, const double* rig) : has_rig_(rig != nullptr) {
-    std::copy(intrinsics, intrinsics + kIntrinsicsSize, intrinsics_);
-    if (rig) std::copy(rig, rig + kPoseSize, rig_);
-  }
-
-  void Add(double u, double v, double w, const double* board_point) {
-    uv_.push_back(u);
-    uv_.push_back(v);
-    w_.push_back(w);
-    points_.insert(points_.end(), board_point, board_point + 3);
-  }
-  int NumResiduals() const { return static_cast<int>(uv_.size()); }
-
-  template <typename T>
-  bool operator()(const T* const pose, T* r) const {
-    T rotation[9];
-    ceres::AngleAxisToRotationMatrix(pose, ceres::RowMajorAdapter3x3(rotation));
-    T intrinsics[kIntrinsicsSize];
-    for (int i = 0; i < kIntrinsicsSize; ++i) intrinsics[i] = T(intrinsics_[i]);
-    for (size_t k = 0; k < uv_.size() / 2; ++k) {
-      const double* x = &points_[3 * k];
-      T xc[3];
-      for (int i = 0; i < 3; ++i) {
-        xc[i] = rotation[3 * i] * x[0] + rotation[3 * i + 1] * x[1] + rotation[3 * i + 2] * x[2] +
-                pose[3 + i];
-      }
-      if (has_rig_) {
-        T rig[kPoseSize], xk[3];
-        for (int i = 0; i < kPoseSize; ++i) rig[i] = T(rig_[i]);
-        TransformPoint(rig, xc, xk);
-        std::copy(xk, xk + 3, xc);
-      }
-      T uv[2];
-      ProjectRadial3(intrinsics, xc, uv);
-      r[2 * k] = w_[k] * (T(uv_[2 * k]) - uv[0]);
-      r[2 * k + 1] = w_[k] * (T(uv_[2 * k + 1]) - uv[1]);
-    }
-    return true;
-  }
-
-  static ceres::CostFunction* Create(ViewPoseError* f) {
-    const int n = f->NumResiduals();
-    return new ceres::AutoDiffCostFunction<ViewPoseError, ceres::DYNAMIC, kPoseSize>(f, n);
-  }
-
- private:
-  bool has_rig_;
-  double intrinsics_[kIntrinsicsSize];
-  double rig_[kPoseSize] = {};
-  std::vector<double> uv_, w_, points_;
-};
 
 // A view of one parameter table inside Params' storage.
 struct Table {
@@ -319,56 +36,35 @@ struct Table {
   double* end() { return ptr + n; }
 };
 
-// Working copies of the parameter tables, in one allocation.  Ceres orders the
-// blocks of an elimination group by address; one buffer in a fixed table order
-// makes that order, and so the floating-point result, the same in every run.
-// Each image's pose and the model's per-image parameters sit side by side.
+// A working copy of the parameter buffer and views of its tables.  Ceres
+// orders the blocks of an elimination group by address; one buffer in a fixed
+// order makes that order, and so the floating-point result, the same in every
+// run.  The offsets come from the Rust layout and are checked by Validate.
 struct Params {
   std::vector<double> storage;
-  Table intrinsics, camera_poses, frames, corrections;
-  int frame_stride;
+  Table frames, corrections;
+  std::vector<double*> intrinsics;  // camera k's lens parameters
+  std::vector<double*> camera_poses;
+  size_t frame_stride;
 
-  Params(const ffi::ProblemData& d, int frame_extra) : frame_stride(kPoseSize + frame_extra) {
-    const size_t num_frames = d.frame_poses.size() / kPoseSize;
-    storage.reserve(d.intrinsics.size() + d.camera_poses.size() + num_frames * frame_stride +
-                    d.corrections.size());
-    storage.insert(storage.end(), d.intrinsics.begin(), d.intrinsics.end());
-    storage.insert(storage.end(), d.camera_poses.begin(), d.camera_poses.end());
-    for (size_t j = 0; j < num_frames; ++j) {
-      storage.insert(storage.end(), d.frame_poses.begin() + kPoseSize * j,
-                     d.frame_poses.begin() + kPoseSize * (j + 1));
-      for (int e = 0; e < frame_extra; ++e) {
-        const size_t i = kParaboloidSize * j + e;
-        storage.push_back(i < d.deformations.size() ? d.deformations[i] : 0.0);
-      }
+  explicit Params(const ffi::ProblemData& d)
+      : storage(d.params.begin(), d.params.end()), frame_stride(d.frame_stride) {
+    for (size_t k = 0; k < d.num_cameras; ++k) {
+      intrinsics.push_back(storage.data() + d.intrinsics_offsets[k]);
+      camera_poses.push_back(storage.data() + d.camera_poses_offset + kPoseSize * k);
     }
-    storage.insert(storage.end(), d.corrections.begin(), d.corrections.end());
-    size_t offset = 0;
-    for (auto [table, n] : {std::pair{&intrinsics, d.intrinsics.size()},
-                            std::pair{&camera_poses, d.camera_poses.size()},
-                            std::pair{&frames, num_frames * frame_stride},
-                            std::pair{&corrections, d.corrections.size()}}) {
-      table->ptr = storage.data() + offset;
-      table->n = n;
-      offset += n;
-    }
+    frames.ptr = storage.data() + d.frames_offset;
+    frames.n = d.frame_stride * d.num_frames;
+    corrections.ptr = storage.data() + d.corrections_offset;
+    corrections.n = kCorrectionStride * d.num_corners;
   }
   Params(const Params&) = delete;
   Params& operator=(const Params&) = delete;
 
   double* Frame(size_t j) { return frames.data() + frame_stride * j; }
+  double* Correction(size_t i) { return corrections.data() + kCorrectionStride * i; }
 
-  void CopyTo(ffi::ProblemData& d) {
-    std::copy(intrinsics.begin(), intrinsics.end(), d.intrinsics.begin());
-    std::copy(camera_poses.begin(), camera_poses.end(), d.camera_poses.begin());
-    const size_t num_frames = d.frame_poses.size() / kPoseSize;
-    for (size_t j = 0; j < num_frames; ++j) {
-      const double* f = Frame(j);
-      std::copy(f, f + kPoseSize, d.frame_poses.begin() + kPoseSize * j);
-      for (int e = 0; e < frame_stride - kPoseSize; ++e) d.deformations[kParaboloidSize * j + e] = f[kPoseSize + e];
-    }
-    std::copy(corrections.begin(), corrections.end(), d.corrections.begin());
-  }
+  void CopyTo(ffi::ProblemData& d) const { std::copy(storage.begin(), storage.end(), d.params.begin()); }
 };
 
 [[noreturn]] void Fail(const std::string& what) { throw std::invalid_argument(what); }
@@ -393,34 +89,45 @@ void RequireFinite(const Vec& v, const char* name) {
   }
 }
 
-int GaugeCornersNeeded(ffi::BoardModel model) {
-  switch (model) {
-    case ffi::BoardModel::Static:
-      return 3;
-    case ffi::BoardModel::Full:
-      return 2;
-    default:
-      return 0;
+// The parameter buffer holds, in this order and without gaps: each camera's
+// lens parameters, the camera poses, the frame blocks, the corrections.
+template <class Board>
+void ValidateLayout(const ffi::ProblemData& d) {
+  RequireSize(d.lens_models, d.num_cameras, "lens_models");
+  RequireSize(d.intrinsics_offsets, d.num_cameras, "intrinsics_offsets");
+  size_t next = 0;
+  for (size_t k = 0; k < d.num_cameras; ++k) {
+    const std::string name(d.lens_models[k]);
+    int n = 0;
+    if (!DispatchLens(name, [&](auto lens) { n = decltype(lens)::kNumParams; })) {
+      Fail("unknown lens model `" + name + "`");
+    }
+    if (d.intrinsics_offsets[k] != next) Fail("intrinsics_offsets do not follow the layout");
+    next += static_cast<size_t>(n);
   }
+  RequireSize(d.intrinsics_held, next, "intrinsics_held");
+  if (d.camera_poses_offset != next) Fail("camera_poses_offset does not follow the layout");
+  next += kPoseSize * d.num_cameras;
+  if (d.frames_offset != next) Fail("frames_offset does not follow the layout");
+  if (d.frame_stride != static_cast<uint32_t>(kPoseSize + Board::kFrameExtra)) {
+    Fail("frame_stride does not match the board model");
+  }
+  next += static_cast<size_t>(d.frame_stride) * d.num_frames;
+  if (d.corrections_offset != next) Fail("corrections_offset does not follow the layout");
+  next += kCorrectionStride * d.num_corners;
+  RequireSize(d.params, next, "params");
 }
 
 // Everything that would otherwise trip a CHECK deep inside Ceres.
+template <class Board>
 void Validate(const ffi::ProblemData& d, const ffi::SolveOptions& o) {
-  if (d.num_cameras == 0) Fail("the problem has no camera");
-  if (d.num_frames == 0) Fail("the problem has no image");
-  if (d.num_corners == 0) Fail("the board has no corner");
   const size_t n = d.obs_uv.size() / 2;
-  if (n == 0) Fail("the problem has no observation");
   RequireSize(d.obs_uv, 2 * n, "obs_uv");
   RequireSize(d.obs_camera, n, "obs_camera");
   RequireSize(d.obs_frame, n, "obs_frame");
   RequireSize(d.obs_corner, n, "obs_corner");
   RequireSize(d.board, 3 * d.num_corners, "board");
-  RequireSize(d.intrinsics, kIntrinsicsSize * d.num_cameras, "intrinsics");
-  RequireSize(d.camera_poses, kPoseSize * d.num_cameras, "camera_poses");
-  RequireSize(d.frame_poses, kPoseSize * d.num_frames, "frame_poses");
-  RequireSize(d.deformations, kParaboloidSize * d.num_frames, "deformations");
-  RequireSize(d.corrections, kCorrectionStride * d.num_corners, "corrections");
+  ValidateLayout<Board>(d);
   RequireFinite(d.obs_uv, "obs_uv");
   if (!d.obs_weight.empty()) {
     RequireSize(d.obs_weight, n, "obs_weight");
@@ -431,11 +138,7 @@ void Validate(const ffi::ProblemData& d, const ffi::SolveOptions& o) {
     }
   }
   RequireFinite(d.board, "board");
-  RequireFinite(d.intrinsics, "intrinsics");
-  RequireFinite(d.camera_poses, "camera_poses");
-  RequireFinite(d.frame_poses, "frame_poses");
-  RequireFinite(d.deformations, "deformations");
-  RequireFinite(d.corrections, "corrections");
+  RequireFinite(d.params, "params");
   for (size_t i = 0; i < n; ++i) {
     if (d.obs_camera[i] >= d.num_cameras || d.obs_frame[i] >= d.num_frames ||
         d.obs_corner[i] >= d.num_corners) {
@@ -445,7 +148,7 @@ void Validate(const ffi::ProblemData& d, const ffi::SolveOptions& o) {
       Fail(s.str());
     }
   }
-  const size_t gauge = static_cast<size_t>(GaugeCornersNeeded(d.model));
+  const size_t gauge = static_cast<size_t>(Board::kGaugeCorners);
   if (o.fix_gauge && !d.fix_corrections && d.gauge_corners.size() < gauge) {
     Fail("the board model needs " + std::to_string(gauge) + " gauge corners");
   }
@@ -486,104 +189,90 @@ struct Assembled {
   std::vector<double*> correction_blocks;  // free corrections, none partly held
 };
 
+// How residuals of one camera are made: its lens model chosen once per camera.
 template <class Board>
-void AddResiduals(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params& p,
-                  Assembled& a) {
-  ceres::LossFunction* loss =
-      o.loss == ffi::LossKind::Cauchy ? new ceres::CauchyLoss(o.loss_scale_px) : nullptr;
-  const size_t n = d.obs_uv.size() / 2;
-  constexpr bool kHasCorner = Board::kCornerSize > 0;
-  constexpr bool kHasFrameExtra = Board::kFrameExtra > 0;
-  const bool pose_only = d.fix_intrinsics && (d.num_cameras == 1 || d.fix_camera_poses) &&
-                         (!kHasCorner || d.fix_corrections) &&
-                         (!kHasFrameExtra || d.fix_deformations);
-  std::vector<double*> blocks;
-  std::vector<bool> corner_used(d.num_corners, false);
-  std::vector<bool> frame_used(d.num_frames, false);
-  a.residuals.reserve(n);
-  // Pose-only views being collected: (camera, frame) -> functor and its observations.
-  std::map<std::pair<uint32_t, uint32_t>, std::pair<ViewPoseError*, std::vector<uint32_t>>> views;
-  for (size_t i = 0; i < n; ++i) {
-    const uint32_t cam = d.obs_camera[i], frame = d.obs_frame[i], corner = d.obs_corner[i];
-    double* intrinsics = &p.intrinsics[kIntrinsicsSize * cam];
-    double* rig = cam > 0 ? &p.camera_poses[kPoseSize * cam] : nullptr;
-    double* frame_block = p.Frame(frame);
-    double* correction = kHasCorner ? &p.corrections[kCorrectionStride * corner] : nullptr;
-    const double* x = &d.board[3 * corner];
-    const double u = d.obs_uv[2 * i], v = d.obs_uv[2 * i + 1];
-    const double w = d.obs_weight.empty() ? 1.0 : d.obs_weight[i];
-    if (pose_only) {
-      double point[3];
-      Board::Point(x, frame_block + kPoseSize, correction, point);
-      // The pose is the first kPoseSize values of the image's block.
-      if (loss == nullptr) {
-        auto& view = views[{cam, frame}];
-        if (view.first == nullptr) view.first = new ViewPoseError(intrinsics, rig);
-        view.first->Add(u, v, w, point);
-        view.second.push_back(static_cast<uint32_t>(i));
-      } else {
-        auto* f = new ViewPoseError(intrinsics, rig);
-        f->Add(u, v, w, point);
-        a.residuals.push_back(
-            a.problem->AddResidualBlock(ViewPoseError::Create(f), loss, frame_block));
-        a.block_observations.push_back({static_cast<uint32_t>(i)});
-      }
-    } else {
-      blocks.clear();
-      blocks.push_back(intrinsics);
-      if (rig) blocks.push_back(rig);
-      blocks.push_back(frame_block);
-      if (kHasCorner) blocks.push_back(correction);
-      ceres::CostFunction* cost;
-      if (o.reference_jacobian) {
-        cost = rig ? ReprojectionError<Board, true>::Create(u, v, w, x)
-                   : ReprojectionError<Board, false>::Create(u, v, w, x);
-      } else if (rig) {
-        cost = new ChainedReprojection<Board, true>(u, v, w, x);
-      } else {
-        cost = new ChainedReprojection<Board, false>(u, v, w, x);
-      }
-      a.residuals.push_back(a.problem->AddResidualBlock(cost, loss, blocks));
-      a.block_observations.push_back({static_cast<uint32_t>(i)});
-    }
-    corner_used[corner] = true;
-    frame_used[frame] = true;
+struct LensOps {
+  ceres::CostFunction* (*cost)(double u, double v, double w, const double* x, bool rig,
+                               bool reference);
+  PoseOnlyView* (*view)(const double* intrinsics, const double* rig);
+};
+
+template <class Lens, class Board>
+ceres::CostFunction* MakeCost(double u, double v, double w, const double* x, bool rig,
+                              bool reference) {
+  if (reference) {
+    return rig ? ReprojectionError<Lens, Board, true>::Create(u, v, w, x)
+               : ReprojectionError<Lens, Board, false>::Create(u, v, w, x);
   }
-  for (auto& [key, view] : views) {
-    a.residuals.push_back(a.problem->AddResidualBlock(ViewPoseError::Create(view.first), nullptr,
-                                                      p.Frame(key.second)));
-    a.block_observations.push_back(std::move(view.second));
-  }
-  ceres::Problem& problem = *a.problem;
-  for (uint32_t f = 0; f < d.num_frames; ++f) {
-    if (frame_used[f]) a.frame_pose_blocks.push_back(p.Frame(f));
-  }
+  if (rig) return new ChainedReprojection<Lens, Board, true>(u, v, w, x);
+  return new ChainedReprojection<Lens, Board, false>(u, v, w, x);
+}
+
+template <class Lens>
+PoseOnlyView* MakeView(const double* intrinsics, const double* rig) {
+  return new PoseOnlyViewOf<Lens>(intrinsics, rig);
+}
+
+template <class Board>
+std::vector<LensOps<Board>> LensOpsPerCamera(const ffi::ProblemData& d) {
+  std::vector<LensOps<Board>> ops;
   for (size_t k = 0; k < d.num_cameras; ++k) {
-    double* intr = &p.intrinsics[kIntrinsicsSize * k];
-    if (d.fix_intrinsics && problem.HasParameterBlock(intr)) problem.SetParameterBlockConstant(intr);
-    double* pose = &p.camera_poses[kPoseSize * k];
+    DispatchLens(std::string(d.lens_models[k]), [&](auto lens) {
+      using Lens = decltype(lens);
+      ops.push_back({&MakeCost<Lens, Board>, &MakeView<Lens>});
+    });
+  }
+  return ops;
+}
+
+// Holds what the problem data asks to hold: intrinsics (all or named ones),
+// camera poses and the board model's per-frame parameters.
+template <class Board>
+void HoldParameters(const ffi::ProblemData& d, bool pose_only, Params& p, Assembled& a) {
+  ceres::Problem& problem = *a.problem;
+  for (size_t k = 0; k < d.num_cameras; ++k) {
+    double* intr = p.intrinsics[k];
+    if (problem.HasParameterBlock(intr)) {
+      const int n = problem.ParameterBlockSize(intr);
+      std::vector<int> held;
+      for (int i = 0; i < n; ++i) {
+        if (d.intrinsics_held[d.intrinsics_offsets[k] + i]) held.push_back(i);
+      }
+      if (d.fix_intrinsics || static_cast<int>(held.size()) == n) {
+        problem.SetParameterBlockConstant(intr);
+      } else if (!held.empty()) {
+        problem.SetManifold(intr, new ceres::SubsetManifold(n, held));
+      }
+    }
+    double* pose = p.camera_poses[k];
     if (k > 0 && d.fix_camera_poses && problem.HasParameterBlock(pose)) {
       problem.SetParameterBlockConstant(pose);
     }
   }
-  if (kHasFrameExtra && d.fix_deformations && !pose_only) {
-    // Hold the per-image parameters, keep the pose free.
+  if (Board::kFrameExtra > 0 && d.fix_deformations && !pose_only) {
+    // Hold the per-frame parameters, keep the pose free.
     std::vector<int> held;
     for (int e = 0; e < Board::kFrameExtra; ++e) held.push_back(kPoseSize + e);
     for (double* block : a.frame_pose_blocks) {
       problem.SetManifold(block, new ceres::SubsetManifold(kPoseSize + Board::kFrameExtra, held));
     }
   }
-  if (!kHasCorner) return;
+}
+
+// Holds corrections that are fixed, frozen or carry the gauge, and lists the
+// free ones the Schur solver may eliminate.
+template <class Board>
+void HoldCorrections(const ffi::ProblemData& d, const ffi::SolveOptions& o,
+                     const std::vector<bool>& corner_used, Params& p, Assembled& a) {
+  ceres::Problem& problem = *a.problem;
   if (d.fix_corrections) {
     for (uint32_t c = 0; c < d.num_corners; ++c) {
-      double* block = &p.corrections[kCorrectionStride * c];
-      if (problem.HasParameterBlock(block)) problem.SetParameterBlockConstant(block);
+      if (problem.HasParameterBlock(p.Correction(c))) problem.SetParameterBlockConstant(p.Correction(c));
     }
     return;
   }
   for (uint32_t c : d.frozen_corners) {
-    if (corner_used[c]) problem.SetParameterBlockConstant(&p.corrections[kCorrectionStride * c]);
+    if (corner_used[c]) problem.SetParameterBlockConstant(p.Correction(c));
   }
   if (o.fix_gauge) {
     for (uint32_t c : d.gauge_corners) {
@@ -595,7 +284,7 @@ void AddResiduals(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params&
   // A partly held gauge corner stays out of the eliminated set: with every
   // eliminated block the same size, Ceres uses its fixed-size Schur kernels.
   for (uint32_t c = 0; c < d.num_corners; ++c) {
-    double* block = &p.corrections[kCorrectionStride * c];
+    double* block = p.Correction(c);
     if (corner_used[c] && !problem.IsParameterBlockConstant(block) &&
         problem.ParameterBlockTangentSize(block) == Board::kCornerSize) {
       a.correction_blocks.push_back(block);
@@ -603,40 +292,93 @@ void AddResiduals(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params&
   }
 }
 
-// Per-image parameters the model keeps beside each pose.
-int FrameExtra(ffi::BoardModel model) {
-  switch (model) {
-    case ffi::BoardModel::Dynamic:
-      return DynamicBoard::kFrameExtra;
-    case ffi::BoardModel::Full:
-      return FullBoard::kFrameExtra;
-    default:
-      return 0;
+template <class Board>
+void AddResiduals(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params& p,
+                  Assembled& a) {
+  ceres::LossFunction* loss =
+      o.loss == ffi::LossKind::Cauchy ? new ceres::CauchyLoss(o.loss_scale_px) : nullptr;
+  const size_t n = d.obs_uv.size() / 2;
+  constexpr bool kHasCorner = Board::kCornerSize > 0;
+  constexpr bool kHasFrameExtra = Board::kFrameExtra > 0;
+  const bool pose_only = d.fix_intrinsics && (d.num_cameras == 1 || d.fix_camera_poses) &&
+                         (!kHasCorner || d.fix_corrections) &&
+                         (!kHasFrameExtra || d.fix_deformations);
+  const std::vector<LensOps<Board>> ops = LensOpsPerCamera<Board>(d);
+  std::vector<double*> blocks;
+  std::vector<bool> corner_used(d.num_corners, false);
+  std::vector<bool> frame_used(d.num_frames, false);
+  a.residuals.reserve(n);
+  // Pose-only views being collected: (camera, frame) -> functor and its observations.
+  std::map<std::pair<uint32_t, uint32_t>,
+           std::pair<std::unique_ptr<PoseOnlyView>, std::vector<uint32_t>>>
+      views;
+  for (size_t i = 0; i < n; ++i) {
+    const uint32_t cam = d.obs_camera[i], frame = d.obs_frame[i], corner = d.obs_corner[i];
+    double* intrinsics = p.intrinsics[cam];
+    double* rig = cam > 0 ? p.camera_poses[cam] : nullptr;
+    double* frame_block = p.Frame(frame);
+    double* correction = kHasCorner ? p.Correction(corner) : nullptr;
+    const double* x = &d.board[3 * corner];
+    const double u = d.obs_uv[2 * i], v = d.obs_uv[2 * i + 1];
+    const double w = d.obs_weight.empty() ? 1.0 : d.obs_weight[i];
+    if (pose_only) {
+      double point[3];
+      Board::Point(x, frame_block + kPoseSize, correction, point);
+      // The pose is the first kPoseSize values of the frame's block.
+      if (loss == nullptr) {
+        auto& view = views[{cam, frame}];
+        if (!view.first) view.first.reset(ops[cam].view(intrinsics, rig));
+        view.first->Add(u, v, w, point);
+        view.second.push_back(static_cast<uint32_t>(i));
+      } else {
+        std::unique_ptr<PoseOnlyView> f(ops[cam].view(intrinsics, rig));
+        f->Add(u, v, w, point);
+        a.residuals.push_back(a.problem->AddResidualBlock(f->Release(), loss, frame_block));
+        a.block_observations.push_back({static_cast<uint32_t>(i)});
+      }
+    } else {
+      blocks.clear();
+      blocks.push_back(intrinsics);
+      if (rig) blocks.push_back(rig);
+      blocks.push_back(frame_block);
+      if (kHasCorner) blocks.push_back(correction);
+      ceres::CostFunction* cost = ops[cam].cost(u, v, w, x, rig != nullptr, o.reference_jacobian);
+      a.residuals.push_back(a.problem->AddResidualBlock(cost, loss, blocks));
+      a.block_observations.push_back({static_cast<uint32_t>(i)});
+    }
+    corner_used[corner] = true;
+    frame_used[frame] = true;
   }
+  for (auto& [key, view] : views) {
+    a.residuals.push_back(
+        a.problem->AddResidualBlock(view.first->Release(), nullptr, p.Frame(key.second)));
+    a.block_observations.push_back(std::move(view.second));
+  }
+  for (uint32_t f = 0; f < d.num_frames; ++f) {
+    if (frame_used[f]) a.frame_pose_blocks.push_back(p.Frame(f));
+  }
+  HoldParameters<Board>(d, pose_only, p, a);
+  if (kHasCorner) HoldCorrections<Board>(d, o, corner_used, p, a);
 }
 
 Assembled Assemble(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params& p) {
-  Validate(d, o);
   SilenceGlogOnce();
   Assembled a;
   a.problem = std::make_unique<ceres::Problem>();
-  switch (d.model) {
-    case ffi::BoardModel::Standard:
-      AddResiduals<StandardBoard>(d, o, p, a);
-      break;
-    case ffi::BoardModel::Static:
-      AddResiduals<StaticBoard>(d, o, p, a);
-      break;
-    case ffi::BoardModel::Dynamic:
-      AddResiduals<DynamicBoard>(d, o, p, a);
-      break;
-    case ffi::BoardModel::Full:
-      AddResiduals<FullBoard>(d, o, p, a);
-      break;
-    default:
-      Fail("unknown board model");
-  }
+  DispatchBoard(std::string(d.board_model),
+                [&](auto board) { AddResiduals<decltype(board)>(d, o, p, a); });
   return a;
+}
+
+// Validates the problem data before anything reads through its offsets.
+void ValidateProblem(const ffi::ProblemData& d, const ffi::SolveOptions& o) {
+  if (d.num_cameras == 0) Fail("the problem has no camera");
+  if (d.num_frames == 0) Fail("the problem has no image");
+  if (d.num_corners == 0) Fail("the board has no corner");
+  if (d.obs_uv.size() < 2) Fail("the problem has no observation");
+  const bool known = DispatchBoard(std::string(d.board_model),
+                                   [&](auto board) { Validate<decltype(board)>(d, o); });
+  if (!known) Fail("unknown board model `" + std::string(d.board_model) + "`");
 }
 
 // Schur elimination of whichever independent set of blocks (image poses or
@@ -737,7 +479,8 @@ namespace ffi {
 
 SolveReport solve(ProblemData& data, const SolveOptions& options) {
   const auto start = std::chrono::steady_clock::now();
-  Params params(data, FrameExtra(data.model));
+  ValidateProblem(data, options);
+  Params params(data);
   Assembled a = Assemble(data, options, params);
   ceres::Solver::Options s = MakeSolverOptions(options);
   ChooseLinearSolver(a, s);
@@ -757,8 +500,7 @@ SolveReport solve(ProblemData& data, const SolveOptions& options) {
   report.message = rust::String(summary.message);
   report.linear_solver = rust::String(ceres::LinearSolverTypeToString(summary.linear_solver_type_used));
   if (report.usable) {
-    for (double v : params.intrinsics) report.usable = report.usable && std::isfinite(v);
-    for (double v : params.frames) report.usable = report.usable && std::isfinite(v);
+    for (double v : params.storage) report.usable = report.usable && std::isfinite(v);
     if (!report.usable) report.message = rust::String("the solve produced non-finite parameters");
   }
   if (report.usable) {
@@ -778,7 +520,8 @@ SolveReport solve(ProblemData& data, const SolveOptions& options) {
 }
 
 Evaluation evaluate(const ProblemData& data, const SolveOptions& options, bool with_jacobian) {
-  Params params(data, FrameExtra(data.model));
+  ValidateProblem(data, options);
+  Params params(data);
   Assembled a = Assemble(data, options, params);
   double cost = 0.0;
   std::vector<double> ordered;
@@ -797,6 +540,61 @@ Evaluation evaluate(const ProblemData& data, const SolveOptions& options, bool w
     for (int v : jacobian.cols) out.jacobian_col_idx.push_back(static_cast<uint32_t>(v));
     for (double v : jacobian.values) out.jacobian_values.push_back(v);
   }
+  return out;
+}
+
+size_t lens_num_params(rust::Str model) {
+  size_t n = 0;
+  if (!DispatchLens(std::string(model), [&](auto lens) { n = decltype(lens)::kNumParams; })) {
+    Fail("unknown lens model `" + std::string(model) + "`");
+  }
+  return n;
+}
+
+rust::Vec<double> project_points(rust::Str model, rust::Slice<const double> params,
+                                 rust::Slice<const double> points) {
+  rust::Vec<double> out;
+  const bool known = DispatchLens(std::string(model), [&](auto lens) {
+    using Lens = decltype(lens);
+    if (params.size() != Lens::kNumParams) Fail("wrong parameter count");
+    for (size_t i = 0; i + 2 < points.size(); i += 3) {
+      double uv[2];
+      if (!Lens::Project(params.data(), points.data() + i, uv)) uv[0] = uv[1] = std::nan("");
+      out.push_back(uv[0]);
+      out.push_back(uv[1]);
+    }
+  });
+  if (!known) Fail("unknown lens model `" + std::string(model) + "`");
+  return out;
+}
+
+rust::Vec<size_t> board_model_sizes(rust::Str model) {
+  rust::Vec<size_t> out;
+  const bool known = DispatchBoard(std::string(model), [&](auto board) {
+    using Board = decltype(board);
+    out.push_back(Board::kFrameExtra);
+    out.push_back(Board::kCornerSize);
+    out.push_back(Board::kGaugeCorners);
+  });
+  if (!known) Fail("unknown board model `" + std::string(model) + "`");
+  return out;
+}
+
+rust::Vec<double> board_point(rust::Str model, rust::Slice<const double> nominal,
+                              rust::Slice<const double> frame_extra,
+                              rust::Slice<const double> correction) {
+  rust::Vec<double> out;
+  const bool known = DispatchBoard(std::string(model), [&](auto board) {
+    using Board = decltype(board);
+    if (nominal.size() != 3 || frame_extra.size() != Board::kFrameExtra ||
+        correction.size() != kCorrectionStride) {
+      Fail("wrong sizes for the board model");
+    }
+    double x[3];
+    Board::Point(nominal.data(), frame_extra.data(), correction.data(), x);
+    for (double v : x) out.push_back(v);
+  });
+  if (!known) Fail("unknown board model `" + std::string(model) + "`");
   return out;
 }
 

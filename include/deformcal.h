@@ -3,8 +3,9 @@
  * C interface of libdeformcal (shared: -ldeformcal; static: libdeformcal.a plus
  * -lceres -lglog -lpthread -ldl -lm -lstdc++).  Usable from C and C++.
  * Every function returns 0 on success and non-zero on failure, with a message in
- * `error` (NUL-terminated, cut to error_len bytes).  No function aborts the
- * process or throws. */
+ * `error` (NUL-terminated, cut to error_len bytes): 1 = an invalid argument,
+ * 2 = the calibration failed (degenerate data, solver failure), 3 = an internal
+ * error.  No function aborts the process or throws. */
 #ifndef DEFORMCAL_H
 #define DEFORMCAL_H
 
@@ -22,11 +23,16 @@ typedef struct DcTarget {
   double spacing;
 } DcTarget;
 
-/* A camera of the rig; camera 0 is the reference of the rig poses. */
+/* The most parameters any lens model has. */
+#define DC_MAX_LENS_PARAMS 12
+
+/* A camera of the rig; camera 0 is the reference of the rig poses.  model is a
+ * lens model name ("radial3", "opencv5", "opencv8", "kb4", "ds"); NULL = "radial3". */
 typedef struct DcCamera {
   const char* name;
   uint32_t width;
   uint32_t height;
+  const char* model;
 } DcCamera;
 
 /* One detected corner; u, v in pixels (integer coordinates are pixel centres). */
@@ -47,9 +53,12 @@ typedef struct DcOptions {
   int32_t max_iterations; /* 0 = 100 */
 } DcOptions;
 
-/* Per-camera result: radial3 intrinsics and the pose camera-k-from-camera-0. */
+/* Per-camera result: the lens model's num_params parameters, in the order
+ * deformcal_lens_params names them (fx, fy, cx, cy first for every model), and
+ * the pose camera-k-from-camera-0. */
 typedef struct DcCameraResult {
-  double fx, fy, cx, cy, k1, k2, k3;
+  uint32_t num_params;
+  double params[DC_MAX_LENS_PARAMS];
   double rotation[3];    /* angle-axis, radians */
   double translation[3]; /* metres */
 } DcCameraResult;
@@ -69,6 +78,11 @@ int deformcal_calibrate(const DcTarget* target, const DcCamera* cameras, size_t 
                         const DcObservation* observations, size_t num_observations,
                         const DcOptions* options, DcResult* result, DcCameraResult* camera_results,
                         char* error, size_t error_len);
+
+/* The parameter names of a lens model (NULL = "radial3"), static strings.  Call
+ * with names = NULL to learn the count, then with room for *count pointers. */
+int deformcal_lens_params(const char* model, const char** names, size_t capacity, size_t* count,
+                          char* error, size_t error_len);
 
 /* A built-in synthetic dataset ("t1".."t4", "reference") seen by one camera.  Call with
  * observations = NULL to learn the count, then with room for *count observations. */

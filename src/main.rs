@@ -165,7 +165,10 @@ fn run_calibrate(args: CalibrateArgs) -> Result<()> {
     let result = calibrate(&dataset, &request)?;
     let written = output::write_calibration(&config.output_dir, &result)?;
     print!("{}", report::summary(&result));
-    println!("  wrote {}", written.display());
+    for w in &written.warnings {
+        eprintln!("warning: {w}");
+    }
+    println!("  wrote {}", written.calibration.display());
     Ok(())
 }
 
@@ -218,7 +221,9 @@ fn run_export(args: ExportArgs) -> Result<()> {
                 args.calibration.display()
             )
         })?;
-    output::write_models(&args.output, &json)?;
+    for w in output::write_models(&args.output, &json)?.warnings {
+        eprintln!("warning: {w}");
+    }
     println!(
         "wrote calibration.json, opencv.yaml and {} camera model(s) to {}",
         json.cameras.len(),

@@ -24,24 +24,24 @@ fn zhang_initialisation_is_close_and_refinement_converges() {
     let truth = t.intrinsics[0];
     assert!(!c.init_fallback);
     assert!(
-        (init.fx / truth.fx - 1.0).abs() < 0.03,
+        (init.fx() / truth.fx() - 1.0).abs() < 0.03,
         "init fx {}",
-        init.fx
+        init.fx()
     );
     assert!(
-        (init.fy / truth.fy - 1.0).abs() < 0.03,
+        (init.fy() / truth.fy() - 1.0).abs() < 0.03,
         "init fy {}",
-        init.fy
+        init.fy()
     );
     assert!(
-        (init.cx - truth.cx).abs() < 0.03 * truth.fx,
+        (init.cx() - truth.cx()).abs() < 0.03 * truth.fx(),
         "init cx {}",
-        init.cx
+        init.cx()
     );
     assert!(c.converged);
     let k = c.state.intrinsics[0];
-    assert!((k.fx - truth.fx).abs() < 3.0, "fx {}", k.fx);
-    assert!((k.fy - truth.fy).abs() < 3.0, "fy {}", k.fy);
+    assert!((k.fx() - truth.fx()).abs() < 3.0, "fx {}", k.fx());
+    assert!((k.fy() - truth.fy()).abs() < 3.0, "fy {}", k.fy());
     assert!(
         (c.rmse_px / noise_rmse(t.noise_px) - 1.0).abs() < 0.1,
         "rmse {}",
@@ -59,8 +59,16 @@ fn rigid_board_all_methods_recover_truth() {
         let k = c.state.intrinsics[0];
         let e = rot_error(&c, &t);
         assert!(c.converged, "{m}");
-        assert!((k.fx - t.intrinsics[0].fx).abs() < 3.0, "{m}: fx {}", k.fx);
-        assert!((k.fy - t.intrinsics[0].fy).abs() < 3.0, "{m}: fy {}", k.fy);
+        assert!(
+            (k.fx() - t.intrinsics[0].fx()).abs() < 3.0,
+            "{m}: fx {}",
+            k.fx()
+        );
+        assert!(
+            (k.fy() - t.intrinsics[0].fy()).abs() < 3.0,
+            "{m}: fy {}",
+            k.fy()
+        );
         assert!(e < 0.4, "{m}: mapping error to truth {e}");
         // More parameters may cost a little precision, never accuracy beyond the noise.
         assert!(e < base + 0.25, "{m}: {e} vs standard {base}");

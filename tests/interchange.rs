@@ -149,9 +149,9 @@ fn corners_vnl_with_missing_corners_and_empty_images_calibrates() {
     assert_eq!(json.observations, d.observations.len());
     for (k, cam) in json.cameras.iter().enumerate() {
         assert!(
-            (cam.intrinsics.fx / truth.intrinsics[k].fx - 1.0).abs() < 2e-3,
+            (cam.intrinsics.fx() / truth.intrinsics[k].fx() - 1.0).abs() < 2e-3,
             "{}",
-            cam.intrinsics.fx
+            cam.intrinsics.fx()
         );
     }
     // import writes the same observations as a CSV.
@@ -183,8 +183,8 @@ fn render(path: &Path, k: &Intrinsics, pose: &Pose, n: usize, spacing: f64, size
             for sv in [-1.0 / 3.0, 0.0, 1.0 / 3.0] {
                 for su in [-1.0 / 3.0, 0.0, 1.0 / 3.0] {
                     let ray = Vector3::new(
-                        (u as f64 + su - k.cx) / k.fx,
-                        (v as f64 + sv - k.cy) / k.fy,
+                        (u as f64 + su - k.cx()) / k.fx(),
+                        (v as f64 + sv - k.cy()) / k.fy(),
                         1.0,
                     );
                     let s = normal.dot(&t) / normal.dot(&ray);
@@ -294,11 +294,11 @@ fn real_mrgingham_corners_calibrate() {
     // mrgingham on 8-bit renders is good to a few tenths of a pixel.
     assert!(json.rmse_px < 0.5, "rmse {}", json.rmse_px);
     assert!(
-        (got.fx / k.fx - 1.0).abs() < 0.005 && (got.fy / k.fy - 1.0).abs() < 0.005,
+        (got.fx() / k.fx() - 1.0).abs() < 0.005 && (got.fy() / k.fy() - 1.0).abs() < 0.005,
         "{got:?}"
     );
     assert!(
-        (got.cx - k.cx).abs() < 2.0 && (got.cy - k.cy).abs() < 2.0,
+        (got.cx() - k.cx()).abs() < 2.0 && (got.cy() - k.cy()).abs() < 2.0,
         "{got:?}"
     );
 }

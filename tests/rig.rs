@@ -19,7 +19,7 @@ fn check_cameras(c: &Calibration, t: &Truth, max_deg: f64, max_m: f64) {
         let e = truth_error_rot(c, t, k);
         assert!(e < 0.4, "{}: mapping error to truth {e}", cam.name);
         assert!(
-            (c.state.intrinsics[k].fx - t.intrinsics[k].fx).abs() < 3.0,
+            (c.state.intrinsics[k].fx() - t.intrinsics[k].fx()).abs() < 3.0,
             "{}: fx",
             cam.name
         );

@@ -24,7 +24,7 @@ int main() {
     return 1;
   }
 
-  DcCamera camera{"cam0", width, height};
+  DcCamera camera{"cam0", width, height, "radial3"};
   DcOptions options{};
   options.method = "full";
   DcResult result{};
@@ -38,9 +38,18 @@ int main() {
               static_cast<unsigned long long>(result.frames),
               static_cast<unsigned long long>(result.observations), result.converged,
               result.rmse_px);
-  std::printf("fx %.9f fy %.9f cx %.9f cy %.9f k1 %.9f k2 %.9f k3 %.9f\n", intrinsics.fx,
-              intrinsics.fy, intrinsics.cx, intrinsics.cy, intrinsics.k1, intrinsics.k2,
-              intrinsics.k3);
+  const char* names[DC_MAX_LENS_PARAMS];
+  size_t num_names = 0;
+  if (deformcal_lens_params(camera.model, names, DC_MAX_LENS_PARAMS, &num_names, error,
+                            sizeof error) != 0 ||
+      num_names != intrinsics.num_params) {
+    std::fprintf(stderr, "lens parameters: %s\n", error);
+    return 1;
+  }
+  for (size_t i = 0; i < num_names; ++i) {
+    std::printf("%s%s %.9f", i ? " " : "", names[i], intrinsics.params[i]);
+  }
+  std::printf("\n");
 
   // Bad input comes back as an error, not a crash.
   DcTarget bad{0, 0, 0.0};

@@ -1,7 +1,7 @@
 //! The `calibration.json` schema (SPEC §5): what a calibration writes and what
 //! `export` and the C API read back.
 use crate::model::board::Paraboloid;
-use crate::model::camera::Intrinsics;
+use crate::model::lens::{Intrinsics, LensModel};
 use crate::solver::calibrate::{Calibration, Stage};
 use serde::{Deserialize, Serialize};
 
@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CameraJson {
     pub name: String,
-    pub model: String,
+    pub model: LensModel,
     pub width: u32,
     pub height: u32,
     pub intrinsics: Intrinsics,
@@ -104,7 +104,7 @@ impl From<&Calibration> for CalibrationJson {
                 .enumerate()
                 .map(|(k, cam)| CameraJson {
                     name: cam.name.clone(),
-                    model: cam.model.clone(),
+                    model: cam.model,
                     width: cam.width,
                     height: cam.height,
                     intrinsics: c.state.intrinsics[k],

@@ -2,6 +2,7 @@
 //! observations without files. Panics and errors become a non-zero return and a message.
 #![allow(unsafe_code)]
 use crate::model::camera::CameraSpec;
+use crate::model::lens::{LensModel, MAX_PARAMS};
 use crate::model::synthetic::{Generator, Preset};
 use crate::solver::problem::Loss;
 use crate::solver::problem::SolverSettings;
@@ -25,6 +26,7 @@ pub struct DcCamera {
     pub name: *const c_char,
     pub width: u32,
     pub height: u32,
+    pub model: *const c_char,
 }
 
 /// `DcObservation`.
@@ -53,13 +55,8 @@ pub struct DcOptions {
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default)]
 pub struct DcCameraResult {
-    pub fx: f64,
-    pub fy: f64,
-    pub cx: f64,
-    pub cy: f64,
-    pub k1: f64,
-    pub k2: f64,
-    pub k3: f64,
+    pub num_params: u32,
+    pub params: [f64; MAX_PARAMS],
     pub rotation: [f64; 3],
     pub translation: [f64; 3],
 }
@@ -76,6 +73,43 @@ pub struct DcResult {
     pub max_out_of_plane_m: f64,
 }
 
+/// Why a C API call failed; its code is the function's return value.
+#[derive(Debug, thiserror::Error)]
+enum CError {
+    /// An argument the header's contract does not allow.
+    #[error("{0}")]
+    Argument(String),
+    /// The calibration itself failed (degenerate data, solver failure).
+    #[error("{0}")]
+    Calibration(#[from] crate::Error),
+    /// A bug: a panic caught at the boundary.
+    #[error("internal error (panic) in deformcal")]
+    Panic,
+}
+
+impl CError {
+    /// The documented return codes of `include/deformcal.h`.
+    fn code(&self) -> i32 {
+        match self {
+            CError::Argument(_) => 1,
+            CError::Calibration(_) => 2,
+            CError::Panic => 3,
+        }
+    }
+}
+
+impl From<String> for CError {
+    fn from(m: String) -> Self {
+        CError::Argument(m)
+    }
+}
+
+impl From<&str> for CError {
+    fn from(m: &str) -> Self {
+        CError::Argument(m.to_string())
+    }
+}
+
 fn write_error(error: *mut c_char, len: usize, message: &str) {
     if error.is_null() || len == 0 {
         return;
@@ -89,19 +123,15 @@ fn write_error(error: *mut c_char, len: usize, message: &str) {
     }
 }
 
-/// Runs `f`, turning an error or a panic into a non-zero return and a message.
-fn guarded(error: *mut c_char, len: usize, f: impl FnOnce() -> Result<(), String>) -> i32 {
-    match catch_unwind(AssertUnwindSafe(f)) {
-        Ok(Ok(())) => 0,
-        Ok(Err(m)) => {
-            write_error(error, len, &m);
-            1
-        }
-        Err(_) => {
-            write_error(error, len, "internal error (panic) in deformcal");
-            2
-        }
-    }
+/// Runs `f`, turning an error or a panic into its code and a message.
+fn guarded(error: *mut c_char, len: usize, f: impl FnOnce() -> Result<(), CError>) -> i32 {
+    let e = match catch_unwind(AssertUnwindSafe(f)) {
+        Ok(Ok(())) => return 0,
+        Ok(Err(e)) => e,
+        Err(_) => CError::Panic,
+    };
+    write_error(error, len, &e.to_string());
+    e.code()
 }
 
 /// # Safety
@@ -172,10 +202,11 @@ pub unsafe extern "C" fn deformcal_calibrate(
                     },
                     width: c.width,
                     height: c.height,
-                    model: "radial3".into(),
+                    model: lens_model(c.model)?,
+                    fix: Vec::new(),
                 })
             })
-            .collect::<Result<Vec<_>, String>>()?;
+            .collect::<Result<Vec<_>, CError>>()?;
         if specs.iter().any(|c| c.width == 0 || c.height == 0) {
             return Err("camera width and height must be positive".into());
         }
@@ -187,15 +218,14 @@ pub unsafe extern "C" fn deformcal_calibrate(
                 return Err(format!(
                     "observation {i}: camera {} or corner {} out of range",
                     o.camera, o.corner
-                ));
+                )
+                .into());
             }
             if !(o.u.is_finite() && o.v.is_finite()) {
-                return Err(format!("observation {i}: pixel is not finite"));
+                return Err(format!("observation {i}: pixel is not finite").into());
             }
             if !seen.insert((o.camera, o.frame, o.corner)) {
-                return Err(format!(
-                    "observation {i}: duplicate camera, frame and corner"
-                ));
+                return Err(format!("observation {i}: duplicate camera, frame and corner").into());
             }
             rows.push((o.camera as usize, o.frame, o.corner as usize, [o.u, o.v]));
         }
@@ -233,8 +263,7 @@ pub unsafe extern "C" fn deformcal_calibrate(
                 settings,
                 gauge: None,
             },
-        )
-        .map_err(|e| e.to_string())?;
+        )?;
         let out = result.as_mut().ok_or("result is NULL")?;
         *out = DcResult {
             rmse_px: c.rmse_px,
@@ -250,14 +279,11 @@ pub unsafe extern "C" fn deformcal_calibrate(
         for k in 0..num_cameras {
             let i = c.state.intrinsics[k];
             let p = c.state.camera_poses[k];
+            let mut params = [0.0; MAX_PARAMS];
+            params[..i.params().len()].copy_from_slice(i.params());
             *camera_results.add(k) = DcCameraResult {
-                fx: i.fx,
-                fy: i.fy,
-                cx: i.cx,
-                cy: i.cy,
-                k1: i.k1,
-                k2: i.k2,
-                k3: i.k3,
+                num_params: i.params().len() as u32,
+                params,
                 rotation: p.rotation,
                 translation: p.translation,
             };
@@ -312,7 +338,8 @@ pub unsafe extern "C" fn deformcal_synthetic(
             return Err(format!(
                 "room for {capacity} observations, {} needed",
                 d.observations.len()
-            ));
+            )
+            .into());
         }
         for (i, o) in d.observations.iter().enumerate() {
             *observations.add(i) = DcObservation {
@@ -322,6 +349,74 @@ pub unsafe extern "C" fn deformcal_synthetic(
                 u: o.uv[0],
                 v: o.uv[1],
             };
+        }
+        Ok(())
+    })
+}
+
+/// # Safety
+/// `name` is null or a NUL-terminated string.
+unsafe fn lens_model(name: *const c_char) -> Result<LensModel, CError> {
+    if name.is_null() {
+        return Ok(LensModel::default());
+    }
+    let name = string(name, "camera model")?;
+    LensModel::parse(&name).ok_or_else(|| {
+        CError::Argument(format!(
+            "unknown lens model `{name}`; expected one of {}",
+            LensModel::names()
+        ))
+    })
+}
+
+/// Every lens model's parameter names as C strings, made once.
+fn param_names_c() -> &'static [(LensModel, Vec<std::ffi::CString>)] {
+    static NAMES: std::sync::OnceLock<Vec<(LensModel, Vec<std::ffi::CString>)>> =
+        std::sync::OnceLock::new();
+    NAMES.get_or_init(|| {
+        LensModel::ALL
+            .iter()
+            .map(|m| {
+                let names = m
+                    .param_names()
+                    .iter()
+                    .map(|n| std::ffi::CString::new(*n).expect("no NUL in a name"))
+                    .collect();
+                (*m, names)
+            })
+            .collect()
+    })
+}
+
+/// The parameter names of a lens model, in the order of `DcCameraResult::params`;
+/// see `include/deformcal.h`.
+///
+/// # Safety
+/// `model` is null or NUL-terminated; `names` is null or holds `capacity` pointers.
+#[no_mangle]
+pub unsafe extern "C" fn deformcal_lens_params(
+    model: *const c_char,
+    names: *mut *const c_char,
+    capacity: usize,
+    count: *mut usize,
+    error: *mut c_char,
+    error_len: usize,
+) -> i32 {
+    guarded(error, error_len, || {
+        let model = lens_model(model)?;
+        let (_, list) = param_names_c()
+            .iter()
+            .find(|(m, _)| *m == model)
+            .expect("every model is listed");
+        *count.as_mut().ok_or("count is NULL")? = list.len();
+        if names.is_null() {
+            return Ok(());
+        }
+        if capacity < list.len() {
+            return Err(format!("names holds {capacity} entries; {} needed", list.len()).into());
+        }
+        for (i, n) in list.iter().enumerate() {
+            *names.add(i) = n.as_ptr();
         }
         Ok(())
     })

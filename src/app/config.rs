@@ -451,10 +451,11 @@ impl Checker<'_> {
                     c.name
                 )));
             }
-            if c.model != "radial3" {
+            if let Some(name) = c.unknown_fixed() {
                 return Err(self.err(format!(
-                    "cameras[{k}].model: unknown lens model `{}` (supported: radial3)",
-                    c.model
+                    "cameras[{k}].fix: `{name}` is not a parameter of `{}` (its parameters: {})",
+                    c.model,
+                    c.model.param_names().join(", ")
                 )));
             }
         }

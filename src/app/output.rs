@@ -5,14 +5,14 @@ use crate::app::exports;
 use crate::app::fsio::write_atomic;
 use crate::error::{Error, Result};
 use crate::solver::calibrate::Calibration;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Writes `calibration.json`, `opencv.yaml` and one `<camera>.cameramodel` per
 /// camera into `dir` (created if needed); returns the JSON's path.
-pub fn write_calibration(dir: &Path, c: &Calibration) -> Result<std::path::PathBuf> {
-    let path = write_models(dir, &CalibrationJson::from(c))?;
+pub fn write_calibration(dir: &Path, c: &Calibration) -> Result<Written> {
+    let written = write_models(dir, &CalibrationJson::from(c))?;
     write_atomic(&dir.join("outliers.csv"), &suspects_csv(c)?)?;
-    Ok(path)
+    Ok(written)
 }
 
 /// `outliers.csv`: the observations the robust loss down-weighted, worst first, so
@@ -41,22 +41,41 @@ pub fn suspects_csv(c: &Calibration) -> Result<Vec<u8>> {
         .map_err(|e| Error::Invalid(format!("outliers.csv: {e}")))
 }
 
-/// Writes a calibration's JSON and its OpenCV and mrcal exports into `dir`.
-pub fn write_models(dir: &Path, json: &CalibrationJson) -> Result<std::path::PathBuf> {
+/// Writes a calibration's JSON and its OpenCV and mrcal exports into `dir`;
+/// returns the JSON's path and a warning per export left out.
+pub fn write_models(dir: &Path, json: &CalibrationJson) -> Result<Written> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let text = serde_json::to_string_pretty(json).expect("calibration serialises");
-    write_atomic(
-        &dir.join("opencv.yaml"),
-        exports::opencv_yaml(json).as_bytes(),
-    )?;
+    let mut warnings = Vec::new();
+    if let Some(yaml) = exports::opencv_yaml(json, &mut warnings) {
+        write_atomic(&dir.join("opencv.yaml"), yaml.as_bytes())?;
+    }
     for cam in &json.cameras {
-        let model = exports::mrcal_cameramodel(cam);
-        write_atomic(
-            &dir.join(exports::model_file_name(&cam.name)),
-            model.as_bytes(),
-        )?;
+        match exports::mrcal_cameramodel(cam) {
+            Some(model) => write_atomic(
+                &dir.join(exports::model_file_name(&cam.name)),
+                model.as_bytes(),
+            )?,
+            None => warnings.push(format!(
+                "{}: not written: mrcal has no `{}` lens model",
+                exports::model_file_name(&cam.name),
+                cam.model
+            )),
+        }
     }
     let path = dir.join("calibration.json");
     write_atomic(&path, text.as_bytes())?;
-    Ok(path)
+    Ok(Written {
+        calibration: path,
+        warnings,
+    })
+}
+
+/// What a calibration wrote.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Written {
+    /// The path of `calibration.json`.
+    pub calibration: PathBuf,
+    /// One line per export that a lens model could not be written to.
+    pub warnings: Vec<String>,
 }

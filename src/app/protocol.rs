@@ -5,13 +5,14 @@ use crate::app::config::{Config, ProtocolConfig};
 use crate::error::{Error, Result};
 use crate::model::board::{Method, Paraboloid};
 use crate::model::camera::CameraSpec;
-use crate::model::camera::Intrinsics;
 use crate::model::dataset::Dataset;
+use crate::model::lens::Intrinsics;
 use crate::model::metrics::{mapping_error, mapping_error_rot};
+use crate::model::state::State;
 use crate::model::synthetic::Truth;
 use crate::model::target::Target;
 use crate::solver::calibrate::{calibrate, Calibration, Request};
-use crate::solver::problem::{rmse, Hold, Problem, SolverSettings, State};
+use crate::solver::problem::{rmse, Hold, Problem, SolverSettings};
 use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
@@ -104,7 +105,7 @@ pub struct Row {
 pub struct CameraRow {
     pub intrinsics: Intrinsics,
     /// π_k: camera-k-from-camera-0.
-    pub pose: crate::model::camera::Pose,
+    pub pose: crate::model::pose::Pose,
     pub test_rmse_px: Option<f64>,
     pub mapping_error_px: Option<f64>,
     pub mapping_error_rot_px: Option<f64>,
@@ -270,7 +271,7 @@ pub fn test_rmse(
     let pi = reference.state.camera_poses[k];
     let mut state = State {
         intrinsics: vec![*intrinsics],
-        camera_poses: vec![crate::model::camera::Pose::identity()],
+        camera_poses: vec![crate::model::pose::Pose::identity()],
         frame_poses: reference
             .state
             .frame_poses

@@ -44,7 +44,7 @@ const ROW_METRICS: [(&str, Getter); 3] = [
 ];
 
 /// Metrics of each camera, summarised per method (prefixed `camera/` with several cameras).
-const CAMERA_METRICS: [(&str, CameraGetter); 12] = [
+const CAMERA_METRICS: [(&str, CameraGetter); 5] = [
     ("test_rmse_px", |c| c.test_rmse_px),
     ("mapping_error_px", |c| c.mapping_error_px),
     ("mapping_error_rot_px", |c| c.mapping_error_rot_px),
@@ -52,14 +52,21 @@ const CAMERA_METRICS: [(&str, CameraGetter); 12] = [
     ("truth_mapping_error_rot_px", |c| {
         c.truth_mapping_error_rot_px
     }),
-    ("fx", |c| Some(c.intrinsics.fx)),
-    ("fy", |c| Some(c.intrinsics.fy)),
-    ("cx", |c| Some(c.intrinsics.cx)),
-    ("cy", |c| Some(c.intrinsics.cy)),
-    ("k1", |c| Some(c.intrinsics.k1)),
-    ("k2", |c| Some(c.intrinsics.k2)),
-    ("k3", |c| Some(c.intrinsics.k3)),
 ];
+
+/// The intrinsics columns: every camera's lens parameters, each name once, in
+/// the order the cameras' models list them.
+fn intrinsics_columns(header: &Header) -> Vec<&'static str> {
+    let mut out: Vec<&'static str> = Vec::new();
+    for cam in &header.cameras {
+        for name in cam.model.param_names() {
+            if !out.contains(name) {
+                out.push(name);
+            }
+        }
+    }
+    out
+}
 
 /// The summary key of a per-camera metric: bare for one camera, `camera/metric` otherwise.
 pub fn camera_key(header: &Header, k: usize, metric: &str) -> String {
@@ -86,6 +93,14 @@ pub fn summarise(header: &Header, rows: &[Row]) -> Summary {
             for (name, get) in CAMERA_METRICS {
                 if let Some(s) = Stat::of(ok.iter().filter_map(|r| r.cameras.get(k).and_then(get)))
                 {
+                    metrics.insert(camera_key(header, k, name), s);
+                }
+            }
+            for name in header.cameras[k].model.param_names() {
+                let values = ok
+                    .iter()
+                    .filter_map(|r| r.cameras.get(k).and_then(|c| c.intrinsics.get(name)));
+                if let Some(s) = Stat::of(values) {
                     metrics.insert(camera_key(header, k, name), s);
                 }
             }
@@ -126,9 +141,10 @@ pub fn protocol_csv(header: &Header, rows: &[Row]) -> Result<Vec<u8>> {
         "iterations",
         "rmse_px",
     ];
-    columns.extend(CAMERA_METRICS[..5].iter().map(|(n, _)| *n));
+    columns.extend(CAMERA_METRICS.iter().map(|(n, _)| *n));
     columns.extend(["max_out_of_plane_m_mean", "max_out_of_plane_m_max"]);
-    columns.extend(CAMERA_METRICS[5..].iter().map(|(n, _)| *n));
+    let intrinsics = intrinsics_columns(header);
+    columns.extend(intrinsics.iter().copied());
     w.write_record(&columns).map_err(to_err)?;
     for r in rows {
         let bends = Stat::of(r.max_out_of_plane_m.iter().copied()).map(|s| s.mean);
@@ -147,10 +163,13 @@ pub fn protocol_csv(header: &Header, rows: &[Row]) -> Result<Vec<u8>> {
                 r.iterations.to_string(),
                 cell(r.rmse_px),
             ];
-            let metric = |i: usize| cell(c.and_then(CAMERA_METRICS[i].1));
-            rec.extend((0..5).map(metric));
+            rec.extend(CAMERA_METRICS.iter().map(|(_, get)| cell(c.and_then(get))));
             rec.extend([cell(bends), cell(max_bend)]);
-            rec.extend((5..CAMERA_METRICS.len()).map(metric));
+            rec.extend(
+                intrinsics
+                    .iter()
+                    .map(|name| cell(c.and_then(|c| c.intrinsics.get(name)))),
+            );
             w.write_record(&rec).map_err(to_err)?;
         }
     }
@@ -253,7 +272,11 @@ pub fn report_markdown(summary: &Summary, rows: &[Row], prefix: &str) -> String 
             let _ = writeln!(
                 s,
                 "- {}: fx {:.2}, fy {:.2}, cx {:.2}, cy {:.2}",
-                h.cameras[k].name, i.fx, i.fy, i.cx, i.cy
+                h.cameras[k].name,
+                i.fx(),
+                i.fy(),
+                i.cx(),
+                i.cy()
             );
         }
         s.push('\n');
@@ -264,7 +287,11 @@ pub fn report_markdown(summary: &Summary, rows: &[Row], prefix: &str) -> String 
             let _ = writeln!(
                 s,
                 "- {}: fx {:.2}, fy {:.2}, cx {:.2}, cy {:.2}",
-                h.cameras[k].name, i.fx, i.fy, i.cx, i.cy
+                h.cameras[k].name,
+                i.fx(),
+                i.fy(),
+                i.cx(),
+                i.cy()
             );
         }
         s.push('\n');
@@ -426,7 +453,7 @@ pub fn write_plots(dir: &Path, summary: &Summary, rows: &[Row]) -> Result<()> {
     )?;
 
     // Intrinsics of camera 0, with the reference and the truth.
-    let lines = |f: fn(&crate::model::camera::Intrinsics) -> f64| {
+    let lines = |f: fn(&crate::model::lens::Intrinsics) -> f64| {
         let mut lines = Vec::new();
         if let Some(r) = &h.reference {
             lines.push(HLine {
@@ -454,9 +481,9 @@ pub fn write_plots(dir: &Path, summary: &Summary, rows: &[Row]) -> Result<()> {
                 vec![Series {
                     name: &fx_name,
                     color: colour(0),
-                    groups: camera_groups(h, rows, 0, |c| Some(c.intrinsics.fx)),
+                    groups: camera_groups(h, rows, 0, |c| Some(c.intrinsics.fx())),
                 }],
-                lines(|k| k.fx),
+                lines(|k| k.fx()),
             ),
             (
                 "cx",
@@ -464,9 +491,9 @@ pub fn write_plots(dir: &Path, summary: &Summary, rows: &[Row]) -> Result<()> {
                 vec![Series {
                     name: &cx_name,
                     color: colour(2),
-                    groups: camera_groups(h, rows, 0, |c| Some(c.intrinsics.cx)),
+                    groups: camera_groups(h, rows, 0, |c| Some(c.intrinsics.cx())),
                 }],
-                lines(|k| k.cx),
+                lines(|k| k.cx()),
             ),
         ],
         &cats,

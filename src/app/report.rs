@@ -27,10 +27,26 @@ pub fn summary(c: &Calibration) -> String {
     );
     for (k, cam) in d.cameras.iter().enumerate() {
         let i = c.state.intrinsics[k];
+        let values: Vec<String> = i
+            .named()
+            .enumerate()
+            // Pixels (fx, fy, cx, cy) to 2 decimals, coefficients to 5.
+            .map(|(n, (name, v))| {
+                if n < 4 {
+                    format!("{name} {v:.2}")
+                } else {
+                    format!("{name} {v:.5}")
+                }
+            })
+            .collect();
         let _ = writeln!(
             s,
-            "  {} ({}×{}): fx {:.2}  fy {:.2}  cx {:.2}  cy {:.2}  k1 {:.5}  k2 {:.5}  k3 {:.5}",
-            cam.name, cam.width, cam.height, i.fx, i.fy, i.cx, i.cy, i.k1, i.k2, i.k3
+            "  {} ({}×{}, {}): {}",
+            cam.name,
+            cam.width,
+            cam.height,
+            cam.model,
+            values.join("  ")
         );
     }
     for (k, cam) in d.cameras.iter().enumerate().skip(1) {

@@ -27,14 +27,27 @@ impl Method {
         Method::Full,
     ];
 
+    /// The registry entry: the board model behind the method.
+    pub fn info(self) -> BoardModelInfo {
+        let (name, frame_params, corner_params, gauge_corners) = match self {
+            Method::Standard => ("standard", 0, 0, 0),
+            // 7 DOF: two corners fully, the z of a third (SPEC §2).
+            Method::Static => ("static", 0, 3, 3),
+            Method::Dynamic => ("dynamic", PARABOLOID_PARAMS, 0, 0),
+            // 4 DOF: (Δx, Δy) of two corners.
+            Method::Full => ("full", PARABOLOID_PARAMS, 2, 2),
+        };
+        BoardModelInfo {
+            name,
+            frame_params,
+            corner_params,
+            gauge_corners,
+        }
+    }
+
     /// The name used in configs and outputs.
     pub fn name(self) -> &'static str {
-        match self {
-            Method::Standard => "standard",
-            Method::Static => "static",
-            Method::Dynamic => "dynamic",
-            Method::Full => "full",
-        }
+        self.info().name
     }
 
     /// Parses a method name.
@@ -44,31 +57,40 @@ impl Method {
 
     /// Whether the method estimates a per-corner correction.
     pub fn has_correction(self) -> bool {
-        matches!(self, Method::Static | Method::Full)
+        self.info().corner_params > 0
     }
 
     /// Whether the method estimates a per-image paraboloid.
     pub fn has_paraboloid(self) -> bool {
-        matches!(self, Method::Dynamic | Method::Full)
+        self.info().frame_params > 0
     }
 
     /// How many corners carry the gauge of the correction.
     pub fn gauge_corners(self) -> usize {
-        match self {
-            Method::Static => 3,
-            Method::Full => 2,
-            _ => 0,
-        }
+        self.info().gauge_corners
     }
 
     /// Components of the per-corner correction that are estimated.
     pub fn correction_dims(self) -> usize {
-        match self {
-            Method::Static => 3,
-            Method::Full => 2,
-            _ => 0,
-        }
+        self.info().corner_params
     }
+}
+
+/// Parameters of the per-frame paraboloid (a, b, c).
+pub const PARABOLOID_PARAMS: usize = 3;
+
+/// What the board-model registry knows of a method's board model; the C++ model
+/// of the same name in `cpp/board.h` has the same sizes (checked by a test).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct BoardModelInfo {
+    /// The method's name, also the C++ model's `kName`.
+    pub name: &'static str,
+    /// Parameters per frame beside its pose.
+    pub frame_params: usize,
+    /// Estimated values of each corner's correction (a prefix of Δx, Δy, Δz).
+    pub corner_params: usize,
+    /// Corners whose correction is held to fix the gauge.
+    pub gauge_corners: usize,
 }
 
 impl fmt::Display for Method {

@@ -1,5 +1,5 @@
 //! Calibration quality metrics (SPEC §3): mapping error, with and without a virtual rotation.
-use crate::model::camera::Intrinsics;
+use crate::model::lens::Intrinsics;
 use nalgebra::{Matrix3, Rotation3, Vector2, Vector3};
 
 /// Grid step of the mapping error in pixels.
@@ -11,8 +11,8 @@ fn grid_rays(a: &Intrinsics, width: u32, height: u32) -> Vec<(Vector2<f64>, Vect
     for v in (0..height).step_by(MAPPING_GRID_STEP_PX as usize) {
         for u in (0..width).step_by(MAPPING_GRID_STEP_PX as usize) {
             let px = Vector2::new(u as f64, v as f64);
-            if let Some(n) = a.unproject(&px) {
-                out.push((px, Vector3::new(n.x, n.y, 1.0)));
+            if let Some(ray) = a.unproject(&px) {
+                out.push((px, ray));
             }
         }
     }
@@ -125,11 +125,9 @@ mod tests {
     use approx::assert_relative_eq;
 
     fn lens() -> Intrinsics {
-        Intrinsics {
-            k1: -0.1,
-            k2: 0.05,
-            ..Intrinsics::pinhole(1000.0, 1000.0, 320.0, 240.0)
-        }
+        Intrinsics::pinhole(1000.0, 1000.0, 320.0, 240.0)
+            .with_param("k1", -0.1)
+            .with_param("k2", 0.05)
     }
 
     #[test]
@@ -163,12 +161,10 @@ mod tests {
     #[test]
     fn symmetric_within_a_small_tolerance() {
         let a = lens();
-        let b = Intrinsics {
-            fx: 1006.0,
-            cx: 323.0,
-            k1: -0.09,
-            ..lens()
-        };
+        let b = lens()
+            .with_param("fx", 1006.0)
+            .with_param("cx", 323.0)
+            .with_param("k1", -0.09);
         let (ab, ba) = (
             mapping_error(&a, &b, 640, 480),
             mapping_error(&b, &a, 640, 480),
@@ -186,10 +182,7 @@ mod tests {
     fn rotation_removes_a_principal_point_shift() {
         // A small principal-point shift is nearly a rotation; the rotated error is far smaller.
         let a = lens();
-        let b = Intrinsics {
-            cx: a.cx + 2.0,
-            ..a
-        };
+        let b = a.with_param("cx", a.cx() + 2.0);
         let plain = mapping_error(&a, &b, 640, 480);
         let rot = mapping_error_rot(&a, &b, 640, 480);
         assert!(plain > 1.9, "{plain}");

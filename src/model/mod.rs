@@ -3,8 +3,11 @@
 pub mod board;
 pub mod camera;
 pub mod dataset;
+pub mod lens;
 pub mod metrics;
+pub mod pose;
 pub mod rig;
+pub mod state;
 pub mod synthetic;
 pub mod target;
 pub mod zhang;

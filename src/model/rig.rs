@@ -2,7 +2,7 @@
 //! from the board poses each camera sees, robustly averaged and chained over the
 //! cameras' overlap graph.
 use crate::error::{Error, Result};
-use crate::model::camera::Pose;
+use crate::model::pose::Pose;
 use nalgebra::{Matrix4, Quaternion, UnitQuaternion, Vector3};
 
 /// Robust average of rigid transforms: the medoid (least total rotation angle to the

@@ -5,8 +5,9 @@
 //! its Allied Vision MG-235B (1936×1216, 5.86 µm pixels) with a 17 mm lens.
 use crate::model::board::Paraboloid;
 use crate::model::camera::CameraSpec;
-use crate::model::camera::{Intrinsics, Pose};
 use crate::model::dataset::Dataset;
+use crate::model::lens::{Intrinsics, LensModel};
+use crate::model::pose::Pose;
 use crate::model::target::Target;
 use nalgebra::{Rotation3, Vector2, Vector3};
 use rand::{Rng, SeedableRng};
@@ -161,12 +162,7 @@ impl Preset {
     /// The `n` cameras of the simulated rig: cam0, cam1, …
     pub fn cameras(self, n: usize) -> Vec<CameraSpec> {
         (0..n)
-            .map(|k| CameraSpec {
-                name: format!("cam{k}"),
-                width: 1936,
-                height: 1216,
-                model: "radial3".into(),
-            })
+            .map(|k| CameraSpec::new(format!("cam{k}"), 1936, 1216, LensModel::Radial3))
             .collect()
     }
 }
@@ -191,29 +187,24 @@ pub fn default_rig(n: usize) -> Vec<Pose> {
 
 /// True intrinsics of camera `k` of a rig: the same lens, slightly different units.
 pub fn rig_intrinsics(k: usize) -> Intrinsics {
-    let base = true_intrinsics();
+    let mut i = true_intrinsics();
     let k = k as f64;
-    Intrinsics {
-        fx: base.fx + 7.0 * k,
-        fy: base.fy + 5.0 * k,
-        cx: base.cx - 4.0 * k,
-        cy: base.cy + 3.0 * k,
-        k1: base.k1 + 0.01 * k,
-        ..base
+    for (name, delta) in [
+        ("fx", 7.0),
+        ("fy", 5.0),
+        ("cx", -4.0),
+        ("cy", 3.0),
+        ("k1", 0.01),
+    ] {
+        let v = i.get(name).expect("radial3 parameter");
+        i.set(name, v + delta * k);
     }
+    i
 }
 
 /// The true intrinsics of the simulated 17 mm lens on 5.86 µm pixels.
 pub fn true_intrinsics() -> Intrinsics {
-    Intrinsics {
-        fx: 2901.0,
-        fy: 2899.5,
-        cx: 975.3,
-        cy: 601.8,
-        k1: -0.11,
-        k2: 0.14,
-        k3: -0.05,
-    }
+    Intrinsics::radial3([2901.0, 2899.5, 975.3, 601.8, -0.11, 0.14, -0.05])
 }
 
 /// Ground truth of a generated dataset.
@@ -306,7 +297,7 @@ impl Generator {
         let [u0, u1, v0, v1] = self.region;
         let u = rng.gen_range(u0 * w..u1 * w);
         let v = rng.gen_range(v0 * h..v1 * h);
-        let ray = Vector3::new((u - k.cx) / k.fx, (v - k.cy) / k.fy, 1.0).normalize();
+        let ray = Vector3::new((u - k.cx()) / k.fx(), (v - k.cy()) / k.fy(), 1.0).normalize();
         let centre = ray * d;
         let deg = std::f64::consts::PI / 180.0;
         let m = self.max_tilt_deg;

@@ -1,7 +1,8 @@
 //! Zhang's initialisation: normalised DLT homographies, closed-form intrinsics,
 //! and board poses from homographies.
 use crate::error::{Error, Result};
-use crate::model::camera::{Intrinsics, Pose};
+use crate::model::lens::Intrinsics;
+use crate::model::pose::Pose;
 use nalgebra::{DMatrix, Matrix3, Rotation3, Vector2, Vector3};
 
 /// Hartley normalisation: centroid at the origin, mean distance √2.
@@ -178,17 +179,17 @@ pub fn intrinsics_centred(hs: &[Matrix3<f64>], width: u32, height: u32) -> Optio
 fn plausible(k: &Intrinsics, width: u32, height: u32) -> bool {
     let (w, h) = (width as f64, height as f64);
     let size = w.max(h);
-    k.fx.is_finite()
-        && k.fy.is_finite()
-        && k.fx > 0.05 * size
-        && k.fy > 0.05 * size
-        && k.fx < 100.0 * size
-        && k.fy < 100.0 * size
-        && (k.fx / k.fy - 1.0).abs() < 0.5
-        && k.cx > -0.25 * w
-        && k.cx < 1.25 * w
-        && k.cy > -0.25 * h
-        && k.cy < 1.25 * h
+    k.fx().is_finite()
+        && k.fy().is_finite()
+        && k.fx() > 0.05 * size
+        && k.fy() > 0.05 * size
+        && k.fx() < 100.0 * size
+        && k.fy() < 100.0 * size
+        && (k.fx() / k.fy() - 1.0).abs() < 0.5
+        && k.cx() > -0.25 * w
+        && k.cx() < 1.25 * w
+        && k.cy() > -0.25 * h
+        && k.cy() < 1.25 * h
 }
 
 /// Board pose (camera-from-board) from a homography and the camera matrix.

@@ -2,15 +2,6 @@
 
 #[cxx::bridge(namespace = "deformcal::ffi")]
 pub mod ffi {
-    /// Board model of the Ceres problem (SPEC §2).
-    #[derive(Debug)]
-    enum BoardModel {
-        Standard,
-        Static,
-        Dynamic,
-        Full,
-    }
-
     /// Robust loss on the squared pixel residual.
     #[derive(Debug)]
     enum LossKind {
@@ -18,10 +9,12 @@ pub mod ffi {
         Cauchy,
     }
 
-    /// Observations and parameter tables of one problem; parameters are updated in place.
+    /// Observations and the parameter buffer of one problem; parameters are
+    /// updated in place. The buffer's layout is `model::state::Layout`'s.
     #[derive(Debug, Clone, Default)]
     struct ProblemData {
-        model: BoardModel,
+        /// Board model name (the method), as in the board-model registry.
+        board_model: String,
         num_cameras: usize,
         num_frames: usize,
         num_corners: usize,
@@ -34,16 +27,22 @@ pub mod ffi {
         obs_uv: Vec<f64>,
         /// Residual weight per observation (empty: all 1).
         obs_weight: Vec<f64>,
-        /// fx fy cx cy k1 k2 k3 per camera.
-        intrinsics: Vec<f64>,
-        /// Camera-k-from-camera-0 (angle-axis, translation) per camera; camera 0 unused.
-        camera_poses: Vec<f64>,
-        /// Camera-0-from-board per frame.
-        frame_poses: Vec<f64>,
-        /// Paraboloid (a, b, c) per frame.
-        deformations: Vec<f64>,
-        /// Static correction, 3 per corner (`full` uses the first two).
-        corrections: Vec<f64>,
+        /// Lens model name per camera, as in the lens-model registry.
+        lens_models: Vec<String>,
+        /// Every parameter, in the layout's order.
+        params: Vec<f64>,
+        /// Start of camera k's intrinsics in `params`.
+        intrinsics_offsets: Vec<u32>,
+        /// Per value of the intrinsics section: held at its value.
+        intrinsics_held: Vec<bool>,
+        /// Start of the camera-k-from-camera-0 poses (6 per camera; camera 0 unused).
+        camera_poses_offset: u32,
+        /// Start of the per-frame blocks: camera-0-from-board pose, then the board
+        /// model's per-frame parameters.
+        frames_offset: u32,
+        frame_stride: u32,
+        /// Start of the per-corner corrections (3 per corner; models use a prefix).
+        corrections_offset: u32,
         /// Corners whose correction carries the gauge.
         gauge_corners: Vec<u32>,
         /// Corners whose correction is held at its value (too few views to estimate).
@@ -109,12 +108,33 @@ pub mod ffi {
             options: &SolveOptions,
             with_jacobian: bool,
         ) -> Result<Evaluation>;
-    }
-}
 
-impl Default for ffi::BoardModel {
-    fn default() -> Self {
-        ffi::BoardModel::Standard
+        // Only the cross-language registry tests call this.
+        #[allow(dead_code)]
+        /// The C++ registry's parameter count of a lens model (an error if unknown).
+        fn lens_num_params(model: &str) -> Result<usize>;
+
+        // Only the cross-language registry tests call this.
+        #[allow(dead_code)]
+        /// The C++ projection of camera-frame points (3 each) to pixels (2 each);
+        /// NaN where the model has no image of a point.
+        fn project_points(model: &str, params: &[f64], points: &[f64]) -> Result<Vec<f64>>;
+
+        // Only the cross-language registry tests call this.
+        #[allow(dead_code)]
+        /// The C++ registry's sizes of a board model: per-frame parameters,
+        /// per-corner correction values and gauge corners.
+        fn board_model_sizes(model: &str) -> Result<Vec<usize>>;
+
+        // Only the cross-language registry tests call this.
+        #[allow(dead_code)]
+        /// The C++ board point of a nominal point under a board model.
+        fn board_point(
+            model: &str,
+            nominal: &[f64],
+            frame_extra: &[f64],
+            correction: &[f64],
+        ) -> Result<Vec<f64>>;
     }
 }
 

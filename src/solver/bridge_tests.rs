@@ -1,5 +1,7 @@
 //! Invalid values reaching the C++ core come back as errors, never as aborts.
-use super::ffi::{self as bridge, BoardModel, LossKind, ProblemData, SolveOptions};
+use super::ffi::{self as bridge, LossKind, ProblemData, SolveOptions};
+use crate::model::lens::LensModel;
+use crate::model::state::Layout;
 
 fn options() -> SolveOptions {
     SolveOptions {
@@ -17,21 +19,35 @@ fn options() -> SolveOptions {
 }
 
 /// A tiny valid problem: one camera, two frames, a 2×2 board seen head-on.
-fn tiny(model: BoardModel) -> ProblemData {
+fn tiny(model: &str) -> ProblemData {
     let board = vec![
         -0.05, -0.05, 0.0, 0.05, -0.05, 0.0, -0.05, 0.05, 0.0, 0.05, 0.05, 0.0,
     ];
+    let method = crate::Method::parse(model).unwrap();
+    let layout = Layout::new(&[LensModel::Radial3], 2, method.info().frame_params, 4);
+    let extra = layout.frame_stride - 6;
+    let mut params = vec![1000.0, 1000.0, 320.0, 240.0, 0.0, 0.0, 0.0];
+    params.extend([0.0; 6]);
+    params.extend([0.0, 0.0, 0.0, 0.0, 0.0, 1.0]);
+    params.extend(vec![0.0; extra]);
+    params.extend([0.1, 0.0, 0.0, 0.0, 0.0, 1.2]);
+    params.extend(vec![0.0; extra]);
+    params.extend([0.0; 12]);
+    assert_eq!(params.len(), layout.len);
     let mut d = ProblemData {
-        model,
+        board_model: model.into(),
         num_cameras: 1,
         num_frames: 2,
         num_corners: 4,
         board: board.clone(),
-        intrinsics: vec![1000.0, 1000.0, 320.0, 240.0, 0.0, 0.0, 0.0],
-        camera_poses: vec![0.0; 6],
-        frame_poses: vec![0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.1, 0.0, 0.0, 0.0, 0.0, 1.2],
-        deformations: vec![0.0; 6],
-        corrections: vec![0.0; 12],
+        lens_models: vec!["radial3".into()],
+        params,
+        intrinsics_offsets: vec![0],
+        intrinsics_held: vec![false; 7],
+        camera_poses_offset: layout.camera_poses as u32,
+        frames_offset: layout.frames as u32,
+        frame_stride: layout.frame_stride as u32,
+        corrections_offset: layout.corrections as u32,
         gauge_corners: vec![0, 1, 2],
         ..ProblemData::default()
     };
@@ -58,20 +74,22 @@ fn error_of(d: &mut ProblemData, o: &SolveOptions) -> String {
 
 #[test]
 fn valid_tiny_problem_solves() {
-    let mut d = tiny(BoardModel::Standard);
+    let mut d = tiny("standard");
     let r = bridge::solve(&mut d, &options()).unwrap();
     assert!(r.usable);
 }
 
 #[test]
 fn nan_initial_guess_is_an_error() {
-    let mut d = tiny(BoardModel::Standard);
-    d.intrinsics[0] = f64::NAN;
-    assert!(error_of(&mut d, &options()).contains("intrinsics[0] is not finite"));
-    let mut d = tiny(BoardModel::Dynamic);
-    d.deformations[4] = f64::INFINITY;
-    assert!(error_of(&mut d, &options()).contains("deformations[4]"));
-    let mut d = tiny(BoardModel::Standard);
+    let mut d = tiny("standard");
+    d.params[0] = f64::NAN;
+    assert!(error_of(&mut d, &options()).contains("params[0] is not finite"));
+    let mut d = tiny("dynamic");
+    // The second frame's b of the paraboloid.
+    let i = d.frames_offset as usize + d.frame_stride as usize + 6 + 1;
+    d.params[i] = f64::INFINITY;
+    assert!(error_of(&mut d, &options()).contains(&format!("params[{i}]")));
+    let mut d = tiny("standard");
     d.obs_uv[3] = f64::NAN;
     assert!(error_of(&mut d, &options()).contains("obs_uv[3]"));
 }
@@ -80,29 +98,39 @@ fn nan_initial_guess_is_an_error() {
 fn empty_and_inconsistent_problems_are_errors() {
     let mut d = ProblemData::default();
     assert!(error_of(&mut d, &options()).contains("no camera"));
-    let mut d = tiny(BoardModel::Standard);
+    let mut d = tiny("standard");
     d.obs_uv.clear();
     d.obs_camera.clear();
     d.obs_frame.clear();
     d.obs_corner.clear();
     assert!(error_of(&mut d, &options()).contains("no observation"));
-    let mut d = tiny(BoardModel::Standard);
+    let mut d = tiny("standard");
     d.obs_corner[2] = 99;
     assert!(error_of(&mut d, &options()).contains("outside the problem"));
-    let mut d = tiny(BoardModel::Standard);
-    d.frame_poses.pop();
-    assert!(error_of(&mut d, &options()).contains("frame_poses has 11 values"));
-    let mut d = tiny(BoardModel::Static);
+    let mut d = tiny("standard");
+    d.params.pop();
+    let expected = format!("params has {} values", d.params.len());
+    assert!(error_of(&mut d, &options()).contains(&expected));
+    let mut d = tiny("standard");
+    d.frames_offset += 1;
+    assert!(error_of(&mut d, &options()).contains("frames_offset does not follow the layout"));
+    let mut d = tiny("standard");
+    d.lens_models = vec!["pinhole9".into()];
+    assert!(error_of(&mut d, &options()).contains("unknown lens model `pinhole9`"));
+    let mut d = tiny("standard");
+    d.board_model = "wobbly".into();
+    assert!(error_of(&mut d, &options()).contains("unknown board model `wobbly`"));
+    let mut d = tiny("static");
     d.gauge_corners = vec![0, 0, 1];
     assert!(error_of(&mut d, &options()).contains("distinct"));
-    let mut d = tiny(BoardModel::Full);
+    let mut d = tiny("full");
     d.gauge_corners = vec![0];
     assert!(error_of(&mut d, &options()).contains("needs 2 gauge corners"));
 }
 
 #[test]
 fn invalid_options_are_errors() {
-    let mut d = tiny(BoardModel::Standard);
+    let mut d = tiny("standard");
     let o = SolveOptions {
         loss_scale_px: -1.0,
         ..options()
@@ -122,11 +150,116 @@ fn invalid_options_are_errors() {
 
 #[test]
 fn a_point_behind_the_camera_fails_cleanly() {
-    let mut d = tiny(BoardModel::Standard);
-    d.frame_poses[5] = 0.0; // the board sits in the camera centre: division by zero
+    let mut d = tiny("standard");
+    // The board sits in the camera centre: division by zero.
+    d.params[d.frames_offset as usize + 5] = 0.0;
     match bridge::solve(&mut d, &options()) {
         Ok(r) => assert!(!r.usable, "{r:?}"),
         Err(e) => assert!(!e.what().is_empty()),
     }
     assert!(bridge::evaluate(&d, &options(), false).is_err());
+}
+
+/// Camera-frame points spread over a wide field of view (up to about 100° off axis
+/// for the fisheye models), with a few on and near the optical axis.
+fn test_points(fisheye: bool) -> Vec<[f64; 3]> {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+    let mut out = vec![[0.0, 0.0, 1.0], [1e-9, -1e-9, 2.0], [0.0, 1e-6, 0.5]];
+    for _ in 0..500 {
+        let max = if fisheye { 1.75_f64 } else { 0.6_f64 };
+        let theta: f64 = rng.gen_range(0.0..max);
+        let phi: f64 = rng.gen_range(0.0..std::f64::consts::TAU);
+        let d: f64 = rng.gen_range(0.3..5.0);
+        out.push([
+            d * theta.sin() * phi.cos(),
+            d * theta.sin() * phi.sin(),
+            d * theta.cos(),
+        ]);
+    }
+    out
+}
+
+#[test]
+fn rust_and_cpp_lens_registries_agree() {
+    use crate::model::lens::Intrinsics;
+    use nalgebra::Vector3;
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+    for model in LensModel::ALL {
+        assert_eq!(
+            bridge::lens_num_params(model.name()).unwrap(),
+            model.num_params(),
+            "{model}"
+        );
+        let fisheye = !model.info().pinhole_like;
+        for _ in 0..20 {
+            // Random but plausible parameters of the model.
+            let mut p: Vec<f64> = vec![
+                rng.gen_range(300.0..3000.0),
+                rng.gen_range(300.0..3000.0),
+                rng.gen_range(300.0..1000.0),
+                rng.gen_range(200.0..800.0),
+            ];
+            let rest = model.num_params() - 4;
+            for k in 0..rest {
+                p.push(match (model, k) {
+                    (LensModel::DoubleSphere, 0) => rng.gen_range(-0.4..0.4),
+                    (LensModel::DoubleSphere, _) => rng.gen_range(0.4..0.7),
+                    _ => rng.gen_range(-0.05..0.05),
+                });
+            }
+            let k = Intrinsics::from_params(model, &p).unwrap();
+            let points = test_points(fisheye);
+            let flat: Vec<f64> = points.iter().flatten().copied().collect();
+            let cpp = bridge::project_points(model.name(), &p, &flat).unwrap();
+            let mut compared = 0;
+            for (x, uv) in points.iter().zip(cpp.chunks(2)) {
+                let Some(rust) = k.project(&Vector3::from(*x)) else {
+                    continue;
+                };
+                compared += 1;
+                for (a, b) in [(rust.x, uv[0]), (rust.y, uv[1])] {
+                    assert!(
+                        (a - b).abs() <= 1e-12 * a.abs().max(1.0),
+                        "{model} at {x:?}: Rust {a} vs C++ {b}"
+                    );
+                }
+            }
+            assert!(compared > 400, "{model}: only {compared} points projected");
+        }
+    }
+    assert!(bridge::lens_num_params("pinhole9").is_err());
+}
+
+#[test]
+fn rust_and_cpp_board_registries_agree() {
+    use crate::model::board::{board_point, Paraboloid};
+    use nalgebra::Vector3;
+    for method in crate::Method::ALL {
+        let info = method.info();
+        let sizes = bridge::board_model_sizes(info.name).unwrap();
+        assert_eq!(
+            sizes,
+            vec![info.frame_params, info.corner_params, info.gauge_corners],
+            "{method}"
+        );
+        let nominal = [0.21, -0.14, 0.0];
+        let bend = Paraboloid {
+            a: 0.3,
+            b: -0.7,
+            c: 0.2,
+        };
+        let correction = [1e-3, -2e-3, 5e-4];
+        let extra = &bend.to_array()[..info.frame_params];
+        let cpp = bridge::board_point(info.name, &nominal, extra, &correction).unwrap();
+        let rust = board_point(method, &Vector3::from(nominal), &correction, &bend);
+        for i in 0..3 {
+            assert!(
+                (cpp[i] - rust[i]).abs() <= 1e-15,
+                "{method}: {cpp:?} vs {rust}"
+            );
+        }
+    }
+    assert!(bridge::board_model_sizes("wobbly").is_err());
 }

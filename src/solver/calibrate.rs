@@ -1,8 +1,9 @@
 //! The calibration pipeline: Zhang initialisation → `standard` → the chosen method.
 use crate::error::{Error, Result};
 use crate::model::board::Method;
-use crate::model::camera::{Intrinsics, Pose};
 use crate::model::dataset::Dataset;
+use crate::model::lens::Intrinsics;
+use crate::model::pose::Pose;
 use crate::model::zhang;
 use crate::solver::problem::{
     choose_gauge, rmse, underobserved_corners, Hold, Problem, SolveReport, SolverSettings, State,

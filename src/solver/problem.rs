@@ -1,10 +1,11 @@
 //! Problem assembly: turns a dataset, a method and a parameter state into the
 //! Ceres problem behind the bridge, and the solution back into typed values.
-use crate::model::camera::{Intrinsics, Pose};
-
 use crate::error::{Error, Result};
-use crate::model::board::{Method, Paraboloid};
+use crate::model::board::Method;
 use crate::model::dataset::Dataset;
+use crate::model::lens::LensModel;
+use crate::model::state::Layout;
+pub use crate::model::state::State;
 use crate::model::target::Target;
 use crate::solver::bridge::ffi::{self, LossKind, ProblemData, SolveOptions};
 
@@ -18,40 +19,6 @@ pub enum Loss {
     None,
     /// Cauchy loss with `loss_scale_px`.
     Cauchy,
-}
-
-/// Every parameter of a calibration: the state the solver refines.
-#[derive(Debug, Clone, PartialEq)]
-pub struct State {
-    /// θ_k per camera.
-    pub intrinsics: Vec<Intrinsics>,
-    /// π_k: camera-k-from-camera-0 (identity for camera 0).
-    pub camera_poses: Vec<Pose>,
-    /// Π_j: camera-0-from-board per frame.
-    pub frame_poses: Vec<Pose>,
-    /// β_j per frame (zero where the method has none).
-    pub deformations: Vec<Paraboloid>,
-    /// Δx_i per corner (zero where the method has none).
-    pub corrections: Vec<[f64; 3]>,
-}
-
-impl State {
-    /// A state with the given intrinsics and poses and no deformation.
-    pub fn rigid(
-        intrinsics: Vec<Intrinsics>,
-        camera_poses: Vec<Pose>,
-        frame_poses: Vec<Pose>,
-        target: &Target,
-    ) -> Self {
-        let frames = frame_poses.len();
-        State {
-            intrinsics,
-            camera_poses,
-            frame_poses,
-            deformations: vec![Paraboloid::default(); frames],
-            corrections: vec![[0.0; 3]; target.num_corners()],
-        }
-    }
 }
 
 /// Which parameter groups are held at their current values.
@@ -222,22 +189,28 @@ fn check_gauge_geometry(t: &Target, corners: &[usize]) -> Result<()> {
 }
 
 impl Problem<'_> {
-    fn data(&self, state: &State) -> Result<ProblemData> {
+    /// The buffer layout of this problem's parameters.
+    pub fn layout(&self) -> Layout {
+        let d = self.dataset;
+        let lenses: Vec<LensModel> = d.cameras.iter().map(|c| c.model).collect();
+        Layout::new(
+            &lenses,
+            d.num_frames(),
+            self.method.info().frame_params,
+            d.target.num_corners(),
+        )
+    }
+
+    fn data(&self, state: &State, layout: &Layout) -> Result<ProblemData> {
         let d = self.dataset;
         let t = d.target;
-        if state.intrinsics.len() != d.cameras.len()
-            || state.camera_poses.len() != d.cameras.len()
-            || state.frame_poses.len() != d.num_frames()
-            || state.deformations.len() != d.num_frames()
-            || state.corrections.len() != t.num_corners()
-        {
-            return Err(Error::Invalid(
-                "parameter state does not match the dataset".into(),
-            ));
-        }
+        let params = layout
+            .pack(state)
+            .ok_or_else(|| Error::Invalid("parameter state does not match the dataset".into()))?;
+        let held: Vec<bool> = d.cameras.iter().flat_map(|c| c.held()).collect();
         let n = d.observations.len();
         let mut data = ProblemData {
-            model: board_model(self.method),
+            board_model: self.method.name().into(),
             num_cameras: d.cameras.len(),
             num_frames: d.num_frames(),
             num_corners: t.num_corners(),
@@ -251,23 +224,18 @@ impl Problem<'_> {
             obs_corner: Vec::with_capacity(n),
             obs_uv: Vec::with_capacity(2 * n),
             obs_weight: Vec::new(),
-            intrinsics: state.intrinsics.iter().flat_map(|k| k.to_array()).collect(),
-            camera_poses: state
-                .camera_poses
+            lens_models: layout.lens_models.iter().map(|m| m.name().into()).collect(),
+            params,
+            intrinsics_offsets: layout
+                .intrinsics_offsets
                 .iter()
-                .flat_map(|p| p.to_array())
+                .map(|&o| o as u32)
                 .collect(),
-            frame_poses: state
-                .frame_poses
-                .iter()
-                .flat_map(|p| p.to_array())
-                .collect(),
-            deformations: state
-                .deformations
-                .iter()
-                .flat_map(|p| p.to_array())
-                .collect(),
-            corrections: state.corrections.iter().flatten().copied().collect(),
+            intrinsics_held: held,
+            camera_poses_offset: layout.camera_poses as u32,
+            frames_offset: layout.frames as u32,
+            frame_stride: layout.frame_stride as u32,
+            corrections_offset: layout.corrections as u32,
             gauge_corners: self.gauge.iter().map(|&c| c as u32).collect(),
             frozen_corners: self.frozen.iter().map(|&c| c as u32).collect(),
             fix_intrinsics: self.hold.intrinsics,
@@ -289,7 +257,8 @@ impl Problem<'_> {
 
     /// Refines `state` in place; an unusable solve is an error, a non-converged one is reported.
     pub fn solve(&self, state: &mut State, settings: &SolverSettings) -> Result<SolveReport> {
-        let mut data = self.data(state)?;
+        let layout = self.layout();
+        let mut data = self.data(state, &layout)?;
         let mut report = ffi::solve(&mut data, &settings.options())
             .map_err(|e| Error::Solver(e.what().to_string()))?;
         if !report.usable {
@@ -299,29 +268,7 @@ impl Problem<'_> {
             )));
         }
         self.unweight(&mut report.residuals);
-        for (k, chunk) in data.intrinsics.chunks(7).enumerate() {
-            state.intrinsics[k] = Intrinsics::from_slice(chunk);
-        }
-        for (k, chunk) in data.camera_poses.chunks(6).enumerate() {
-            state.camera_poses[k] = Pose::from_slice(chunk);
-        }
-        for (j, chunk) in data.frame_poses.chunks(6).enumerate() {
-            state.frame_poses[j] = Pose::from_slice(chunk);
-        }
-        if self.method.has_paraboloid() {
-            for (j, c) in data.deformations.chunks(3).enumerate() {
-                state.deformations[j] = Paraboloid {
-                    a: c[0],
-                    b: c[1],
-                    c: c[2],
-                };
-            }
-        }
-        if self.method.has_correction() {
-            for (i, c) in data.corrections.chunks(3).enumerate() {
-                state.corrections[i] = [c[0], c[1], c[2]];
-            }
-        }
+        layout.unpack(&data.params, state);
         Ok(report)
     }
 
@@ -333,7 +280,7 @@ impl Problem<'_> {
         settings: &SolverSettings,
         with_jacobian: bool,
     ) -> Result<Evaluation> {
-        let data = self.data(state)?;
+        let data = self.data(state, &self.layout())?;
         let mut e = ffi::evaluate(&data, &settings.options(), with_jacobian)
             .map_err(|e| Error::Solver(e.what().to_string()))?;
         self.unweight(&mut e.residuals);
@@ -356,14 +303,4 @@ pub fn rmse(residuals: &[f64]) -> f64 {
         return f64::NAN;
     }
     (residuals.iter().map(|r| r * r).sum::<f64>() / n as f64).sqrt()
-}
-
-/// The bridge's name for a method's board model.
-fn board_model(method: Method) -> ffi::BoardModel {
-    match method {
-        Method::Standard => ffi::BoardModel::Standard,
-        Method::Static => ffi::BoardModel::Static,
-        Method::Dynamic => ffi::BoardModel::Dynamic,
-        Method::Full => ffi::BoardModel::Full,
-    }
 }

@@ -1,0 +1,332 @@
+// Residual functors: observed minus projected pixel of one board corner, for
+// every lens model and board model (the two registries in camera.h and
+// board.h).  Knows nothing of how a problem is assembled.
+#pragma once
+
+#include <ceres/ceres.h>
+
+#include <algorithm>
+#include <type_traits>
+#include <utility>
+#include <vector>
+
+#include "deformcal/cpp/board.h"
+#include "deformcal/cpp/camera.h"
+
+namespace deformcal {
+
+template <class A, class B>
+struct Concat;
+template <int... A, int... B>
+struct Concat<std::integer_sequence<int, A...>, std::integer_sequence<int, B...>> {
+  using type = std::integer_sequence<int, A..., B...>;
+};
+
+// Residual of one observed corner, differentiated in one autodiff piece: the
+// reference the chained Jacobian below is tested against.  Blocks: intrinsics,
+// [camera-k-from-camera-0 if kRig], the frame's block (camera-0-from-board pose
+// followed by the board model's per-frame parameters), then the corner's
+// correction if the board model has one.
+template <class Lens, class Board, bool kRig>
+class ReprojectionError {
+ public:
+  ReprojectionError(double u, double v, double w, const double* x)
+      : u_(u), v_(v), w_(w), x_{x[0], x[1], x[2]} {}
+
+  template <typename T>
+  bool operator()(const T* const p0, const T* const p1, T* r) const {
+    const T* const p[] = {p0, p1};
+    return Evaluate(p, r);
+  }
+  template <typename T>
+  bool operator()(const T* const p0, const T* const p1, const T* const p2, T* r) const {
+    const T* const p[] = {p0, p1, p2};
+    return Evaluate(p, r);
+  }
+  template <typename T>
+  bool operator()(const T* const p0, const T* const p1, const T* const p2, const T* const p3,
+                  T* r) const {
+    const T* const p[] = {p0, p1, p2, p3};
+    return Evaluate(p, r);
+  }
+
+  // w scales the residual: 1 for a full-resolution detection, 0.5^level for a
+  // corner found on a decimated image.
+  static ceres::CostFunction* Create(double u, double v, double w, const double* x) {
+    return Make(new ReprojectionError(u, v, w, x), BlockSizes{});
+  }
+
+ private:
+  static constexpr int kFrame = kRig ? 2 : 1;
+  static constexpr int kFrameSize = kPoseSize + Board::kFrameExtra;
+  using LeadingSizes =
+      std::conditional_t<kRig, std::integer_sequence<int, Lens::kNumParams, kPoseSize, kFrameSize>,
+                         std::integer_sequence<int, Lens::kNumParams, kFrameSize>>;
+  using BlockSizes = std::conditional_t<
+      Board::kCornerSize == 0, LeadingSizes,
+      typename Concat<LeadingSizes, std::integer_sequence<int, Board::kCornerSize>>::type>;
+
+  template <int... Ns>
+  static ceres::CostFunction* Make(ReprojectionError* f, std::integer_sequence<int, Ns...>) {
+    return new ceres::AutoDiffCostFunction<ReprojectionError, 2, Ns...>(f);
+  }
+
+  template <typename T>
+  bool Evaluate(const T* const* p, T* r) const {
+    const T* frame = p[kFrame];
+    const T* corner = Board::kCornerSize > 0 ? p[kFrame + 1] : nullptr;
+    T board[3];
+    Board::Point(x_, frame + kPoseSize, corner, board);
+    T xc[3];
+    TransformPoint(frame, board, xc);
+    if constexpr (kRig) {
+      T xk[3];
+      TransformPoint(p[1], xc, xk);
+      xc[0] = xk[0];
+      xc[1] = xk[1];
+      xc[2] = xk[2];
+    }
+    T uv[2];
+    if (!Lens::Project(p[0], xc, uv)) return false;
+    r[0] = w_ * (T(u_) - uv[0]);
+    r[1] = w_ * (T(v_) - uv[1]);
+    return true;
+  }
+
+  double u_, v_, w_;
+  double x_[3];
+};
+
+// The same residual with its Jacobian assembled by the chain rule from three
+// pieces: the board point (Jets over the model's own parameters), the rigid
+// transform (closed form; d/dX is the rotation matrix), and the projection (Jets
+// over intrinsics and the camera point).  The Jets carry 3 to 10 derivatives
+// instead of up to 21, which makes the Jacobian several times cheaper;
+// ReprojectionError stays as the reference it is tested against.
+template <class Lens, class Board, bool kRig>
+class ChainedReprojection final : public ceres::CostFunction {
+ public:
+  static constexpr int kFrameSize = kPoseSize + Board::kFrameExtra;
+  static constexpr int kModel = Board::kFrameExtra + Board::kCornerSize;
+
+  ChainedReprojection(double u, double v, double w, const double* x)
+      : u_(u), v_(v), w_(w), x_{x[0], x[1], x[2]} {
+    set_num_residuals(2);
+    auto* sizes = mutable_parameter_block_sizes();
+    sizes->push_back(Lens::kNumParams);
+    if (kRig) sizes->push_back(kPoseSize);
+    sizes->push_back(kFrameSize);
+    if (Board::kCornerSize > 0) sizes->push_back(Board::kCornerSize);
+  }
+
+  bool Evaluate(double const* const* p, double* r, double** jacobians) const override {
+    const double* intrinsics = p[0];
+    const double* rig = kRig ? p[1] : nullptr;
+    const double* frame = p[kRig ? 2 : 1];
+    const double* corner = Board::kCornerSize > 0 ? p[kRig ? 3 : 2] : nullptr;
+
+    // Board point X and dX/d(frame extra, corner).
+    double X[3];
+    double dX[3][kModel > 0 ? kModel : 1] = {};
+    if constexpr (kModel > 0) {
+      using JM = ceres::Jet<double, kModel>;
+      JM extra[Board::kFrameExtra > 0 ? Board::kFrameExtra : 1];
+      JM corr[Board::kCornerSize > 0 ? Board::kCornerSize : 1];
+      for (int e = 0; e < Board::kFrameExtra; ++e) extra[e] = JM(frame[kPoseSize + e], e);
+      for (int c = 0; c < Board::kCornerSize; ++c) corr[c] = JM(corner[c], Board::kFrameExtra + c);
+      JM out[3];
+      Board::Point(x_, extra, corr, out);
+      for (int i = 0; i < 3; ++i) {
+        X[i] = out[i].a;
+        for (int k = 0; k < kModel; ++k) dX[i][k] = out[i].v[k];
+      }
+    } else {
+      Board::Point(x_, static_cast<const double*>(nullptr), static_cast<const double*>(nullptr), X);
+    }
+
+    if (jacobians == nullptr) {
+      double xc[3], uv[2];
+      TransformPoint(frame, X, xc);
+      if (kRig) {
+        double xk[3];
+        TransformPoint(rig, xc, xk);
+        std::copy(xk, xk + 3, xc);
+      }
+      if (!Lens::Project(intrinsics, xc, uv)) return false;
+      r[0] = w_ * (u_ - uv[0]);
+      r[1] = w_ * (v_ - uv[1]);
+      return true;
+    }
+
+    // xc = R X + t, its pose derivatives in closed form; dxc/dX = R.
+    double xc[3], R[9], dxc_dw[9];
+    TransformPointWithJacobian(frame, X, xc, R, dxc_dw);
+
+    // Rig: xk = R_k xc + t_k; dxk/dxc = R_k.
+    double cam[3] = {xc[0], xc[1], xc[2]};
+    double dcam_dxc[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+    double dcam_drig[3][kPoseSize] = {};
+    if (kRig) {
+      double dk_dw[9];
+      TransformPointWithJacobian(rig, xc, cam, dcam_dxc, dk_dw);
+      for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j) dcam_drig[i][j] = dk_dw[3 * i + j];
+        dcam_drig[i][3 + i] = 1.0;
+      }
+    }
+
+    // Projection: Jets over intrinsics and the camera point.
+    constexpr int kLens = Lens::kNumParams;
+    using JP = ceres::Jet<double, kLens + 3>;
+    JP ij[kLens], pc[3], uv[2];
+    for (int i = 0; i < kLens; ++i) ij[i] = JP(intrinsics[i], i);
+    for (int i = 0; i < 3; ++i) pc[i] = JP(cam[i], kLens + i);
+    if (!Lens::Project(ij, pc, uv)) return false;
+    r[0] = w_ * (u_ - uv[0].a);
+    r[1] = w_ * (v_ - uv[1].a);
+
+    // dr/dcam (2x3) and dr/dxc = dr/dcam * dcam/dxc.
+    double dr_dcam[2][3], dr_dxc[2][3];
+    for (int k = 0; k < 2; ++k) {
+      for (int c = 0; c < 3; ++c) dr_dcam[k][c] = -w_ * uv[k].v[kLens + c];
+      for (int c = 0; c < 3; ++c) {
+        dr_dxc[k][c] = dr_dcam[k][0] * dcam_dxc[c] + dr_dcam[k][1] * dcam_dxc[3 + c] +
+                       dr_dcam[k][2] * dcam_dxc[6 + c];
+      }
+    }
+    int b = 0;
+    if (double* J = jacobians[b++]) {
+      for (int k = 0; k < 2; ++k)
+        for (int i = 0; i < kLens; ++i) J[k * kLens + i] = -w_ * uv[k].v[i];
+    }
+    if (kRig) {
+      if (double* J = jacobians[b]) {
+        for (int k = 0; k < 2; ++k)
+          for (int j = 0; j < kPoseSize; ++j)
+            J[k * kPoseSize + j] = dr_dcam[k][0] * dcam_drig[0][j] + dr_dcam[k][1] * dcam_drig[1][j] +
+                                   dr_dcam[k][2] * dcam_drig[2][j];
+      }
+      ++b;
+    }
+    // dr/dX = dr/dxc * R, used for the model's parameters.
+    double dr_dX[2][3];
+    for (int k = 0; k < 2; ++k)
+      for (int m = 0; m < 3; ++m)
+        dr_dX[k][m] = dr_dxc[k][0] * R[m] + dr_dxc[k][1] * R[3 + m] + dr_dxc[k][2] * R[6 + m];
+    if (double* J = jacobians[b]) {
+      for (int k = 0; k < 2; ++k) {
+        for (int j = 0; j < 3; ++j) {
+          J[k * kFrameSize + j] = dr_dxc[k][0] * dxc_dw[j] + dr_dxc[k][1] * dxc_dw[3 + j] +
+                                  dr_dxc[k][2] * dxc_dw[6 + j];
+          J[k * kFrameSize + 3 + j] = dr_dxc[k][j];
+        }
+        for (int e = 0; e < Board::kFrameExtra; ++e) {
+          J[k * kFrameSize + kPoseSize + e] =
+              dr_dX[k][0] * dX[0][e] + dr_dX[k][1] * dX[1][e] + dr_dX[k][2] * dX[2][e];
+        }
+      }
+    }
+    ++b;
+    if (Board::kCornerSize > 0) {
+      if (double* J = jacobians[b]) {
+        for (int k = 0; k < 2; ++k)
+          for (int c = 0; c < Board::kCornerSize; ++c) {
+            const int m = Board::kFrameExtra + c;
+            J[k * Board::kCornerSize + c] =
+                dr_dX[k][0] * dX[0][m] + dr_dX[k][1] * dX[1][m] + dr_dX[k][2] * dX[2][m];
+          }
+      }
+    }
+    return true;
+  }
+
+ private:
+  double u_, v_, w_;
+  double x_[3];
+};
+
+// Residuals of the corners of one view when only the board pose is free (a
+// test-error refit): board points, intrinsics and rig pose are constants, the
+// rotation is applied once per view, and the Jets carry 6 derivatives.  Without
+// a robust loss one block holds a whole view; with one, a single corner.
+// PoseOnlyView hides the lens so that views of several lens models share a map.
+class PoseOnlyView {
+ public:
+  virtual ~PoseOnlyView() = default;
+  virtual void Add(double u, double v, double w, const double* board_point) = 0;
+  // Hands the functor to a new cost function, which owns it.
+  virtual ceres::CostFunction* Release() = 0;
+};
+
+template <class Lens>
+class ViewPoseError {
+ public:
+  ViewPoseError(const double* intrinsics, const double* rig) : has_rig_(rig != nullptr) {
+    std::copy(intrinsics, intrinsics + Lens::kNumParams, intrinsics_);
+    if (rig) std::copy(rig, rig + kPoseSize, rig_);
+  }
+
+  void Add(double u, double v, double w, const double* board_point) {
+    uv_.push_back(u);
+    uv_.push_back(v);
+    w_.push_back(w);
+    points_.insert(points_.end(), board_point, board_point + 3);
+  }
+  int NumResiduals() const { return static_cast<int>(uv_.size()); }
+
+  template <typename T>
+  bool operator()(const T* const pose, T* r) const {
+    T rotation[9];
+    ceres::AngleAxisToRotationMatrix(pose, ceres::RowMajorAdapter3x3(rotation));
+    T intrinsics[Lens::kNumParams];
+    for (int i = 0; i < Lens::kNumParams; ++i) intrinsics[i] = T(intrinsics_[i]);
+    for (size_t k = 0; k < uv_.size() / 2; ++k) {
+      const double* x = &points_[3 * k];
+      T xc[3];
+      for (int i = 0; i < 3; ++i) {
+        xc[i] = rotation[3 * i] * x[0] + rotation[3 * i + 1] * x[1] + rotation[3 * i + 2] * x[2] +
+                pose[3 + i];
+      }
+      if (has_rig_) {
+        T rig[kPoseSize], xk[3];
+        for (int i = 0; i < kPoseSize; ++i) rig[i] = T(rig_[i]);
+        TransformPoint(rig, xc, xk);
+        std::copy(xk, xk + 3, xc);
+      }
+      T uv[2];
+      if (!Lens::Project(intrinsics, xc, uv)) return false;
+      r[2 * k] = w_[k] * (T(uv_[2 * k]) - uv[0]);
+      r[2 * k + 1] = w_[k] * (T(uv_[2 * k + 1]) - uv[1]);
+    }
+    return true;
+  }
+
+ private:
+  bool has_rig_;
+  double intrinsics_[Lens::kNumParams];
+  double rig_[kPoseSize] = {};
+  std::vector<double> uv_, w_, points_;
+};
+
+template <class Lens>
+class PoseOnlyViewOf final : public PoseOnlyView {
+ public:
+  PoseOnlyViewOf(const double* intrinsics, const double* rig)
+      : f_(new ViewPoseError<Lens>(intrinsics, rig)) {}
+  ~PoseOnlyViewOf() override { delete f_; }
+  void Add(double u, double v, double w, const double* board_point) override {
+    f_->Add(u, v, w, board_point);
+  }
+  ceres::CostFunction* Release() override {
+    const int n = f_->NumResiduals();
+    auto* cost =
+        new ceres::AutoDiffCostFunction<ViewPoseError<Lens>, ceres::DYNAMIC, kPoseSize>(f_, n);
+    f_ = nullptr;
+    return cost;
+  }
+
+ private:
+  ViewPoseError<Lens>* f_;
+};
+
+}  // namespace deformcal
