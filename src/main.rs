@@ -136,6 +136,9 @@ struct GenerateArgs {
     /// Cameras on the simulated rig, 0.3 m apart (default: the preset's).
     #[arg(long)]
     cameras: Option<usize>,
+    /// Lens model of the simulated cameras: radial3, opencv5, opencv8, kb4 or ds.
+    #[arg(long, default_value = "radial3")]
+    model: String,
 }
 
 fn run_calibrate(args: CalibrateArgs) -> Result<()> {
@@ -183,8 +186,16 @@ fn run_generate(args: GenerateArgs) -> Result<()> {
     anyhow::ensure!(args.images != Some(0), "--images must be at least 1");
     let cameras = args.cameras.unwrap_or(preset.default_cameras());
     anyhow::ensure!((1..=16).contains(&cameras), "--cameras must be 1 to 16");
+    let model = deformcal::LensModel::parse(&args.model).with_context(|| {
+        format!(
+            "--model: unknown lens model `{}` (expected one of {})",
+            args.model,
+            deformcal::LensModel::names()
+        )
+    })?;
     let (dataset, truth) = Generator::new(preset, args.images, args.seed)
         .with_cameras(cameras)
+        .with_models(&vec![model; cameras])
         .generate();
     deformcal::app::source::write_preset(&args.out, &dataset, &truth)?;
     println!(

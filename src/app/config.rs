@@ -411,12 +411,10 @@ impl Checker<'_> {
                     )));
                 } else {
                     for (given, simulated) in raw.cameras.iter().zip(preset.cameras(*n)) {
-                        if (given.width, given.height, &given.model)
-                            != (simulated.width, simulated.height, &simulated.model)
-                        {
+                        if (given.width, given.height) != (simulated.width, simulated.height) {
                             return Err(self.err(format!(
-                                "[[cameras]] `{}` differs from the simulated {}×{} {} camera; only the name may be changed",
-                                given.name, simulated.width, simulated.height, simulated.model
+                                "[[cameras]] `{}` differs from the simulated {}×{} camera; only the name, model and fix may be changed",
+                                given.name, simulated.width, simulated.height
                             )));
                         }
                     }

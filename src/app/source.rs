@@ -31,12 +31,17 @@ pub fn load_source(
             seed,
             cameras: n,
         } => {
+            let models: Vec<_> = (0..*n)
+                .map(|k| cameras.get(k).map(|c| c.model).unwrap_or_default())
+                .collect();
             let (mut d, t) = synthetic::Generator::new(*preset, *images, *seed)
                 .with_cameras(*n)
+                .with_models(&models)
                 .generate();
-            // The config may rename the simulated cameras.
+            // The config names the simulated cameras and may hold parameters.
             for (spec, given) in d.cameras.iter_mut().zip(cameras) {
                 spec.name = given.name.clone();
+                spec.fix = given.fix.clone();
             }
             Ok((d, Some(t)))
         }

@@ -185,18 +185,30 @@ pub fn default_rig(n: usize) -> Vec<Pose> {
         .collect()
 }
 
-/// True intrinsics of camera `k` of a rig: the same lens, slightly different units.
+/// True intrinsics of camera `k` of a `radial3` rig: the same lens, slightly different units.
 pub fn rig_intrinsics(k: usize) -> Intrinsics {
-    let mut i = true_intrinsics();
+    rig_intrinsics_of(LensModel::Radial3, k)
+}
+
+/// True intrinsics of camera `k` of a rig of `model` cameras.
+pub fn rig_intrinsics_of(model: LensModel, k: usize) -> Intrinsics {
+    let mut i = true_intrinsics_of(model);
     let k = k as f64;
+    // The first distortion coefficient of each model varies a little too.
+    let first = model.param_names()[4];
+    let step = if model.info().pinhole_like {
+        0.01
+    } else {
+        0.002
+    };
     for (name, delta) in [
         ("fx", 7.0),
         ("fy", 5.0),
         ("cx", -4.0),
         ("cy", 3.0),
-        ("k1", 0.01),
+        (first, step),
     ] {
-        let v = i.get(name).expect("radial3 parameter");
+        let v = i.get(name).expect("parameter of the model");
         i.set(name, v + delta * k);
     }
     i
@@ -204,7 +216,26 @@ pub fn rig_intrinsics(k: usize) -> Intrinsics {
 
 /// The true intrinsics of the simulated 17 mm lens on 5.86 µm pixels.
 pub fn true_intrinsics() -> Intrinsics {
-    Intrinsics::radial3([2901.0, 2899.5, 975.3, 601.8, -0.11, 0.14, -0.05])
+    true_intrinsics_of(LensModel::Radial3)
+}
+
+/// The simulated camera (1936 × 1216 pixels) under each lens model: the 17 mm
+/// lens for the pinhole-like models (with tangential and rational terms where
+/// the model has them), a fisheye whose image corners lie about 95° off axis
+/// for `kb4`, and a 190° (diagonal) lens for `ds`.
+pub fn true_intrinsics_of(model: LensModel) -> Intrinsics {
+    let p: &[f64] = match model {
+        LensModel::Radial3 => &[2901.0, 2899.5, 975.3, 601.8, -0.11, 0.14, -0.05],
+        LensModel::OpenCv5 => &[
+            2901.0, 2899.5, 975.3, 601.8, -0.11, 0.14, 1.2e-3, -8e-4, -0.05,
+        ],
+        LensModel::OpenCv8 => &[
+            2901.0, 2899.5, 975.3, 601.8, 0.4, -0.1, 1.2e-3, -8e-4, 0.02, 0.5, -0.05, 0.01,
+        ],
+        LensModel::Kb4 => &[690.0, 689.2, 971.6, 606.4, 0.02, -0.012, 0.004, -6e-4],
+        LensModel::DoubleSphere => &[520.0, 519.4, 971.6, 606.4, -0.18, 0.61],
+    };
+    Intrinsics::from_params(model, p).expect("parameter count of the model")
 }
 
 /// Ground truth of a generated dataset.
@@ -290,6 +321,22 @@ impl Generator {
         self
     }
 
+    /// The same with camera k seen through a lens of `models[k]` (one per camera of
+    /// the rig). Fisheye views are aimed over almost the whole image, so that the
+    /// board reaches the image corners.
+    pub fn with_models(mut self, models: &[LensModel]) -> Self {
+        assert_eq!(models.len(), self.rig.len(), "one lens model per camera");
+        self.intrinsics = models
+            .iter()
+            .enumerate()
+            .map(|(k, &m)| rig_intrinsics_of(m, k))
+            .collect();
+        if models.iter().any(|m| !m.info().pinhole_like) {
+            self.region = [0.03, 0.97, 0.03, 0.97];
+        }
+        self
+    }
+
     fn random_pose(&self, rng: &mut ChaCha8Rng, camera: &CameraSpec, k: &Intrinsics) -> Pose {
         let [dmin, dmax] = self.spec.distance_m;
         let d = rng.gen_range(dmin..dmax);
@@ -297,7 +344,14 @@ impl Generator {
         let [u0, u1, v0, v1] = self.region;
         let u = rng.gen_range(u0 * w..u1 * w);
         let v = rng.gen_range(v0 * h..v1 * h);
-        let ray = Vector3::new((u - k.cx()) / k.fx(), (v - k.cy()) / k.fy(), 1.0).normalize();
+        // Pinhole-like lenses aim by the pinhole (as the presets always have);
+        // a fisheye needs its own unprojection to aim near the border.
+        let pinhole = Vector3::new((u - k.cx()) / k.fx(), (v - k.cy()) / k.fy(), 1.0).normalize();
+        let ray = if k.model().info().pinhole_like {
+            pinhole
+        } else {
+            k.unproject(&Vector2::new(u, v)).unwrap_or(pinhole)
+        };
         let centre = ray * d;
         let deg = std::f64::consts::PI / 180.0;
         let m = self.max_tilt_deg;
@@ -344,7 +398,10 @@ impl Generator {
         let mut rng = ChaCha8Rng::seed_from_u64(self.seed);
         let s = &self.spec;
         let target = s.target;
-        let cameras = self.preset.cameras(self.rig.len());
+        let mut cameras = self.preset.cameras(self.rig.len());
+        for (c, k) in cameras.iter_mut().zip(&self.intrinsics) {
+            c.model = k.model();
+        }
         let print = self.print_scale;
         let nxy = Normal::new(0.0, s.print_sigma_xy_m).expect("sigma is non-negative");
         let nz = Normal::new(0.0, s.print_sigma_z_m).expect("sigma is non-negative");

@@ -4,7 +4,7 @@ use crate::model::board::Method;
 use crate::model::dataset::Dataset;
 use crate::model::lens::Intrinsics;
 use crate::model::pose::Pose;
-use crate::model::zhang;
+use crate::model::{fisheye_init, zhang};
 use crate::solver::problem::{
     choose_gauge, rmse, underobserved_corners, Hold, Problem, SolveReport, SolverSettings, State,
 };
@@ -323,6 +323,24 @@ fn initialise(dataset: &Dataset, warnings: &mut Vec<String>) -> Result<(Dataset,
                 format!("camera {}: {what}", cam.name)
             }));
         }
+        if !cam.model.info().pinhole_like {
+            let frames: Vec<usize> = own.iter().map(|(j, _)| *j).collect();
+            let template = Intrinsics::pinhole_of(cam.model, 1.0, 1.0, 0.0, 0.0);
+            let points = fisheye_init::views_of(&dataset, k, &frames);
+            let (kk, poses) = fisheye_init::initialise(&template, cam.width, cam.height, &points)
+                .ok_or_else(|| {
+                Error::Init(format!(
+                    "{}: no focal length of the `{}` model explains the board views",
+                    cam.name, cam.model
+                ))
+            })?;
+            for (j, pose) in frames.into_iter().zip(poses) {
+                views[k][j] = Some(pose);
+            }
+            check_orientations(&cam.name, views[k].iter().flatten())?;
+            intrinsics.push(kk);
+            continue;
+        }
         let list: Vec<Matrix3<f64>> = own.iter().map(|(_, h)| *h).collect();
         let (kk, fallback) = match zhang::initial_intrinsics(&list, cam.width, cam.height) {
             Ok(k) => k,
@@ -364,7 +382,14 @@ fn initialise(dataset: &Dataset, warnings: &mut Vec<String>) -> Result<(Dataset,
             })?);
         }
         check_orientations(&cam.name, views[k].iter().flatten())?;
-        intrinsics.push(kk);
+        // Zhang's pinhole, as the camera's model with no distortion.
+        intrinsics.push(Intrinsics::pinhole_of(
+            cam.model,
+            kk.fx(),
+            kk.fy(),
+            kk.cx(),
+            kk.cy(),
+        ));
     }
     let names: Vec<String> = dataset.cameras.iter().map(|c| c.name.clone()).collect();
     let rig = crate::model::rig::initial_rig(&views, &names)?;

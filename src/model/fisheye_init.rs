@@ -1,0 +1,134 @@
+//! Initialisation for lens models whose image is not a pinhole image (`kb4`,
+//! `ds`), where Zhang's homographies of pixels mean nothing.
+//!
+//! Chosen approach: the principal point at the image centre, no distortion
+//! (an equidistant `kb4`, a stereographic `ds`), and a one-dimensional search
+//! for the focal length. For each candidate focal length every observed pixel
+//! is unprojected to a ray; the rays in front of the camera (up to 80° off
+//! axis) give a homography of the board plane to normalised coordinates, and so
+//! a board pose per view (planar PnP by Zhang's decomposition with K = I); the
+//! candidate whose poses reproject best wins. Unprojecting first means a view of
+//! the board near the border of a 180° image is treated like any other, and the
+//! search needs no guess of the field of view. The full model (distortion,
+//! principal point) is then left to the `standard` solve that follows.
+use crate::model::dataset::Dataset;
+use crate::model::lens::Intrinsics;
+use crate::model::pose::Pose;
+use crate::model::zhang;
+use nalgebra::{Vector2, Vector3};
+
+/// Rays further off axis than this (cos of 80°) stay out of the pose homography.
+const MIN_RAY_Z: f64 = 0.17;
+/// Candidate focal lengths, as fractions of the image diagonal, on a geometric grid.
+const F_RANGE: (f64, f64) = (0.05, 3.0);
+const F_STEPS: usize = 60;
+
+/// One view's correspondences: board points (x, y) and pixels.
+pub type ViewPoints = (Vec<Vector2<f64>>, Vec<Vector2<f64>>);
+
+/// The board pose of one view under `k`, from the rays in front of the camera.
+fn view_pose(k: &Intrinsics, board: &[Vector2<f64>], pixels: &[Vector2<f64>]) -> Option<Pose> {
+    let mut b = Vec::with_capacity(board.len());
+    let mut n = Vec::with_capacity(board.len());
+    for (x, uv) in board.iter().zip(pixels) {
+        let ray = k.unproject(uv)?;
+        if ray.z > MIN_RAY_Z {
+            b.push(*x);
+            n.push(Vector2::new(ray.x / ray.z, ray.y / ray.z));
+        }
+    }
+    if b.len() < 4 {
+        return None;
+    }
+    let h = zhang::homography(&b, &n)?;
+    zhang::pose_from_homography(&h, &Intrinsics::pinhole(1.0, 1.0, 0.0, 0.0))
+}
+
+/// RMS reprojection error of a view under `k` at `pose`.
+fn view_rms(k: &Intrinsics, pose: &Pose, board: &[Vector2<f64>], pixels: &[Vector2<f64>]) -> f64 {
+    let mut sum = 0.0;
+    for (x, uv) in board.iter().zip(pixels) {
+        match k.project(&pose.transform(&Vector3::new(x.x, x.y, 0.0))) {
+            Some(p) => sum += (p - uv).norm_squared(),
+            None => return f64::INFINITY,
+        }
+    }
+    (sum / board.len() as f64).sqrt()
+}
+
+/// Poses of every view and the median view RMS under `k`; `None` if a view fails.
+fn score(k: &Intrinsics, views: &[ViewPoints]) -> Option<(f64, Vec<Pose>)> {
+    let mut poses = Vec::with_capacity(views.len());
+    let mut errors = Vec::with_capacity(views.len());
+    for (board, pixels) in views {
+        let pose = view_pose(k, board, pixels)?;
+        errors.push(view_rms(k, &pose, board, pixels));
+        poses.push(pose);
+    }
+    errors.sort_by(f64::total_cmp);
+    let median = errors[errors.len() / 2];
+    median.is_finite().then_some((median, poses))
+}
+
+/// Initial intrinsics of `template`'s model for one camera and the board pose of
+/// each of its views, or `None` if no focal length explains the views.
+pub fn initialise(
+    template: &Intrinsics,
+    width: u32,
+    height: u32,
+    views: &[ViewPoints],
+) -> Option<(Intrinsics, Vec<Pose>)> {
+    let (cx, cy) = ((width as f64 - 1.0) / 2.0, (height as f64 - 1.0) / 2.0);
+    let diagonal = (width as f64).hypot(height as f64);
+    let neutral = |f: f64| Intrinsics::pinhole_of(template.model(), f, f, cx, cy);
+    let ratio = (F_RANGE.1 / F_RANGE.0).powf(1.0 / (F_STEPS - 1) as f64);
+    let mut best: Option<(f64, f64, Vec<Pose>)> = None;
+    let mut f = F_RANGE.0 * diagonal;
+    for _ in 0..F_STEPS {
+        if let Some((e, poses)) = score(&neutral(f), views) {
+            if best.as_ref().is_none_or(|b| e < b.1) {
+                best = Some((f, e, poses));
+            }
+        }
+        f *= ratio;
+    }
+    let (mut f, e, mut poses) = best?;
+    // Golden-section refinement within one grid step either side.
+    let (mut lo, mut hi) = (f / ratio, f * ratio);
+    let g = (5f64.sqrt() - 1.0) / 2.0;
+    for _ in 0..30 {
+        let a = hi - g * (hi - lo);
+        let b = lo + g * (hi - lo);
+        let ea = score(&neutral(a), views).map_or(f64::INFINITY, |s| s.0);
+        let eb = score(&neutral(b), views).map_or(f64::INFINITY, |s| s.0);
+        if ea < eb {
+            hi = b;
+        } else {
+            lo = a;
+        }
+    }
+    let mid = 0.5 * (lo + hi);
+    if let Some((em, pm)) = score(&neutral(mid), views) {
+        if em < e {
+            (f, poses) = (mid, pm);
+        }
+    }
+    Some((neutral(f), poses))
+}
+
+/// The correspondences of camera `camera`'s views in `frames`, in that order.
+pub fn views_of(dataset: &Dataset, camera: usize, frames: &[usize]) -> Vec<ViewPoints> {
+    let mut index = vec![usize::MAX; dataset.num_frames()];
+    for (i, &j) in frames.iter().enumerate() {
+        index[j] = i;
+    }
+    let mut out: Vec<ViewPoints> = vec![(Vec::new(), Vec::new()); frames.len()];
+    for o in dataset.observations.iter().filter(|o| o.camera == camera) {
+        if let Some(view) = out.get_mut(index[o.frame]) {
+            let p = dataset.target.nominal(o.corner);
+            view.0.push(Vector2::new(p.x, p.y));
+            view.1.push(Vector2::new(o.uv[0], o.uv[1]));
+        }
+    }
+    out
+}
