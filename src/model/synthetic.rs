@@ -220,9 +220,10 @@ pub fn true_intrinsics() -> Intrinsics {
 }
 
 /// The simulated camera (1936 × 1216 pixels) under each lens model: the 17 mm
-/// lens for the pinhole-like models (with tangential and rational terms where
-/// the model has them), a fisheye whose image corners lie about 95° off axis
-/// for `kb4`, and a 190° (diagonal) lens for `ds`.
+/// lens for `radial3` and `opencv5` (with tangential terms), a 112° (diagonal)
+/// wide-angle lens for `opencv8` (whose rational terms a narrow lens cannot
+/// determine), a fisheye whose image corners lie about 95° off axis for `kb4`,
+/// and a lens of over 190° for `ds`, whose image circle just cuts the corners.
 pub fn true_intrinsics_of(model: LensModel) -> Intrinsics {
     let p: &[f64] = match model {
         LensModel::Radial3 => &[2901.0, 2899.5, 975.3, 601.8, -0.11, 0.14, -0.05],
@@ -230,7 +231,7 @@ pub fn true_intrinsics_of(model: LensModel) -> Intrinsics {
             2901.0, 2899.5, 975.3, 601.8, -0.11, 0.14, 1.2e-3, -8e-4, -0.05,
         ],
         LensModel::OpenCv8 => &[
-            2901.0, 2899.5, 975.3, 601.8, 0.4, -0.1, 1.2e-3, -8e-4, 0.02, 0.5, -0.05, 0.01,
+            1100.0, 1099.4, 975.3, 601.8, 0.1, 0.01, 1.2e-3, -8e-4, 5e-4, 0.3, 0.03, 1e-3,
         ],
         LensModel::Kb4 => &[690.0, 689.2, 971.6, 606.4, 0.02, -0.012, 0.004, -6e-4],
         LensModel::DoubleSphere => &[520.0, 519.4, 971.6, 606.4, -0.18, 0.61],
@@ -322,8 +323,8 @@ impl Generator {
     }
 
     /// The same with camera k seen through a lens of `models[k]` (one per camera of
-    /// the rig). Fisheye views are aimed over almost the whole image, so that the
-    /// board reaches the image corners.
+    /// the rig). Views through wide lenses are aimed over almost the whole image,
+    /// so that the board reaches the image corners.
     pub fn with_models(mut self, models: &[LensModel]) -> Self {
         assert_eq!(models.len(), self.rig.len(), "one lens model per camera");
         self.intrinsics = models
@@ -331,8 +332,25 @@ impl Generator {
             .enumerate()
             .map(|(k, &m)| rig_intrinsics_of(m, k))
             .collect();
-        if models.iter().any(|m| !m.info().pinhole_like) {
+        // A wide lens is calibrated over its whole image only if the board goes
+        // there: aim over almost all of it when the corners are over 45° off axis.
+        let corner = Vector2::new(0.0, 0.0);
+        let wide = self.intrinsics.iter().any(|k| {
+            k.unproject(&corner)
+                .is_none_or(|ray| ray.z < std::f64::consts::FRAC_1_SQRT_2)
+        });
+        if wide {
             self.region = [0.03, 0.97, 0.03, 0.97];
+            // And held closer, as a user would, so that it fills as much of the
+            // view as it does for the presets' 17 mm lens (of the rig's
+            // narrowest lens, so that its cameras still share views).
+            let f = self
+                .intrinsics
+                .iter()
+                .map(Intrinsics::fx)
+                .fold(0.0, f64::max);
+            let scale = (f / true_intrinsics().fx()).min(1.0);
+            self.spec.distance_m = self.spec.distance_m.map(|d| d * scale);
         }
         self
     }
