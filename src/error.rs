@@ -29,6 +29,10 @@ pub enum Error {
     /// Ceres rejected the problem or could not solve it.
     #[error("solver: {0}")]
     Solver(String),
+    /// Photos that cannot give a calibration: a pattern matching nothing, too
+    /// few usable images. Names the pattern.
+    #[error("photos `{pattern}`: {message}")]
+    Photos { pattern: String, message: String },
     /// An argument outside its valid range.
     #[error("invalid argument: {0}")]
     Invalid(String),

@@ -36,6 +36,21 @@ enum Command {
     Merge(MergeArgs),
     /// Run the protocol of several configs and write one combined report.
     Batch(BatchArgs),
+    /// Only detect the board in the config's photos: detections.csv and observations.csv.
+    Detect(DetectArgs),
+}
+
+#[derive(Args, Debug)]
+struct DetectArgs {
+    /// The TOML config whose `[data] photos` to detect.
+    #[arg(long, short)]
+    config: PathBuf,
+    /// Also write the observations CSV here (it is always written to the output dir).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Override [output] dir (detections.csv, observations.csv, the detection cache).
+    #[arg(long)]
+    output: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]
@@ -158,8 +173,7 @@ fn run_calibrate(args: CalibrateArgs) -> Result<()> {
         anyhow::ensure!((1..=256).contains(&t), "--threads must be 1 to 256");
         config.calibration.threads = t;
     }
-    let (dataset, _truth) =
-        deformcal::app::source::load_source(&config.data, config.target, &config.cameras)?;
+    let (dataset, _truth) = deformcal::app::source::load_data(&config)?;
     let request = Request {
         method: config.calibration.method,
         settings: SolverSettings::from(&config.calibration),
@@ -210,8 +224,7 @@ fn run_generate(args: GenerateArgs) -> Result<()> {
 
 fn run_import(args: ImportArgs) -> Result<()> {
     let config = Config::load(&args.config)?;
-    let (dataset, _) =
-        deformcal::app::source::load_source(&config.data, config.target, &config.cameras)?;
+    let (dataset, _) = deformcal::app::source::load_data(&config)?;
     deformcal::app::observations_csv::write(&dataset, &args.out)?;
     println!(
         "wrote {} observations of {} frames to {}",
@@ -219,6 +232,29 @@ fn run_import(args: ImportArgs) -> Result<()> {
         dataset.num_frames(),
         args.out.display()
     );
+    Ok(())
+}
+
+fn run_detect(args: DetectArgs) -> Result<()> {
+    let mut config = Config::load(&args.config)?;
+    if let Some(o) = args.output {
+        config.output_dir = o;
+    }
+    anyhow::ensure!(
+        matches!(config.data, deformcal::app::config::DataSource::Photos { .. }),
+        "{}: [data] has no `photos` to detect the board in",
+        args.config.display()
+    );
+    let (dataset, _) = deformcal::app::source::load_data(&config)?;
+    if let Some(out) = &args.out {
+        deformcal::app::observations_csv::write(&dataset, out)?;
+        println!(
+            "wrote {} observations of {} frames to {}",
+            dataset.observations.len(),
+            dataset.num_frames(),
+            out.display()
+        );
+    }
     Ok(())
 }
 
@@ -430,6 +466,7 @@ fn main() -> ExitCode {
         Some(Command::Protocol(a)) => run_protocol(a),
         Some(Command::Merge(a)) => run_merge(a),
         Some(Command::Batch(a)) => run_batch(a),
+        Some(Command::Detect(a)) => run_detect(a),
         None => run_calibrate(cli.calibrate),
     };
     match result {

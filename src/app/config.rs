@@ -75,6 +75,7 @@ struct RawData {
     images: Option<usize>,
     seed: Option<u64>,
     cameras: Option<usize>,
+    photos: Option<PhotoPatterns>,
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -131,9 +132,25 @@ struct RawConfig {
     output: Option<RawOutput>,
 }
 
+/// `[data] photos`: one glob for one camera, or one glob per camera name.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(untagged)]
+pub enum PhotoPatterns {
+    /// One camera: one frame per matching file, in sorted name order.
+    One(String),
+    /// Several cameras: what the wildcards matched is the time step.
+    PerCamera(BTreeMap<String, String>),
+}
+
 /// Where observations come from.
 #[derive(Debug, Clone, PartialEq)]
 pub enum DataSource {
+    /// Image files in which the board is detected (SPEC §5 Photos).
+    Photos {
+        /// The config's folder, which the patterns are relative to.
+        base: PathBuf,
+        patterns: PhotoPatterns,
+    },
     /// An observations CSV (path resolved against the config's folder).
     Observations(PathBuf),
     /// mrgingham's / mrcal's corners table, with file-name patterns per camera.
@@ -338,6 +355,58 @@ impl Checker<'_> {
         }
     }
 
+    /// `[data] photos`, which excludes every other source.
+    fn photos(&self, data: &RawData) -> Result<DataSource> {
+        let others = data.observations.is_some()
+            || data.corners_vnl.is_some()
+            || data.synthetic.is_some()
+            || !data.camera_patterns.is_empty();
+        if others || data.images.is_some() || data.seed.is_some() || data.cameras.is_some() {
+            return Err(self.err(
+                "[data] photos excludes observations, corners_vnl, camera_patterns and synthetic data"
+                    .into(),
+            ));
+        }
+        let patterns = data.photos.clone().expect("caller checked");
+        let all: Vec<&String> = match &patterns {
+            PhotoPatterns::One(p) => vec![p],
+            PhotoPatterns::PerCamera(m) => m.values().collect(),
+        };
+        if all.is_empty() || all.iter().any(|p| p.trim().is_empty()) {
+            return Err(self.err("data.photos: a pattern must not be empty".into()));
+        }
+        Ok(DataSource::Photos {
+            base: self.base.clone(),
+            patterns,
+        })
+    }
+
+    /// Photo patterns and [[cameras]] must name the same cameras.
+    fn check_photo_cameras(&self, patterns: &PhotoPatterns, cameras: &[CameraSpec]) -> Result<()> {
+        match patterns {
+            PhotoPatterns::One(_) if cameras.len() > 1 => Err(self.err(format!(
+                "data.photos: with {} cameras give one pattern per camera, e.g. photos = {{ {} = \"left-*.png\", ... }}",
+                cameras.len(),
+                cameras[0].name
+            ))),
+            PhotoPatterns::One(_) => Ok(()),
+            PhotoPatterns::PerCamera(m) => {
+                if let Some(unknown) = m.keys().find(|k| !cameras.iter().any(|c| &c.name == *k)) {
+                    return Err(self.err(format!(
+                        "data.photos names `{unknown}`, which is not a camera of [[cameras]]"
+                    )));
+                }
+                match cameras.iter().find(|c| !m.contains_key(&c.name)) {
+                    Some(c) => Err(self.err(format!(
+                        "data.photos needs a pattern for camera `{}`",
+                        c.name
+                    ))),
+                    None => Ok(()),
+                }
+            }
+        }
+    }
+
     fn check_target(&self, table: &str, t: &Target) -> Result<()> {
         if t.rows < 2 || t.cols < 2 {
             return Err(self.err(format!(
@@ -362,6 +431,7 @@ impl Checker<'_> {
 
     fn check(&self, raw: RawConfig) -> Result<Config> {
         let data = match raw.data.corners_vnl {
+            _ if raw.data.photos.is_some() => self.photos(&raw.data)?,
             Some(vnl) => {
                 if raw.data.observations.is_some() || raw.data.synthetic.is_some() {
                     return Err(self.err(
@@ -422,7 +492,9 @@ impl Checker<'_> {
                 };
                 (spec.target, cameras)
             }
-            DataSource::Observations(_) | DataSource::CornersVnl { .. } => {
+            DataSource::Observations(_)
+            | DataSource::CornersVnl { .. }
+            | DataSource::Photos { .. } => {
                 let t = raw
                     .target
                     .ok_or_else(|| self.err("missing table [target]".into()))?;
@@ -550,6 +622,9 @@ impl Checker<'_> {
                     )));
                 }
             }
+        }
+        if let DataSource::Photos { patterns, .. } = &data {
+            self.check_photo_cameras(patterns, &cameras)?;
         }
         let output_dir = match raw.output {
             Some(o) => self.base.join(o.dir),

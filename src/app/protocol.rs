@@ -161,8 +161,7 @@ pub struct Setup {
 
 /// Loads the data, runs the reference calibration and draws the subsets.
 pub fn prepare(config: &Config, protocol: &ProtocolConfig) -> Result<Setup> {
-    let (dataset, truth) =
-        crate::app::source::load_source(&config.data, config.target, &config.cameras)?;
+    let (dataset, truth) = crate::app::source::load_data(config)?;
     // One Ceres thread per solve: parallelism comes from running tasks side by side,
     // and single-threaded solves sum in a fixed order, so results are reproducible.
     let settings = SolverSettings {
@@ -234,6 +233,7 @@ fn dataset_name(config: &Config) -> String {
         crate::app::config::DataSource::Synthetic { preset, .. } => preset.name().to_string(),
         crate::app::config::DataSource::Observations(p) => p.display().to_string(),
         crate::app::config::DataSource::CornersVnl { path, .. } => path.display().to_string(),
+        crate::app::config::DataSource::Photos { base, .. } => base.display().to_string(),
     }
 }
 

@@ -1,6 +1,6 @@
-//! Where a dataset comes from: an observations CSV, mrgingham's corners.vnl or a
-//! built-in synthetic preset; and writing a generated preset to disk.
-use crate::app::config::DataSource;
+//! Where a dataset comes from: an observations CSV, mrgingham's corners.vnl, photos
+//! or a built-in synthetic preset; and writing a generated preset to disk.
+use crate::app::config::{Config, DataSource};
 use crate::app::fsio::write_atomic;
 use crate::app::{corners_vnl, observations_csv};
 use crate::error::Result;
@@ -10,7 +10,28 @@ use crate::model::synthetic::{self, Truth};
 use crate::model::target::Target;
 use std::path::Path;
 
+/// Loads a config's `[data]`; photos are detected (or taken from the detection
+/// cache) with a progress bar, their results written into the output dir and
+/// summarised on stderr.
+pub fn load_data(config: &Config) -> Result<(Dataset, Option<synthetic::Truth>)> {
+    if let DataSource::Photos { .. } = &config.data {
+        let run = crate::app::photos::detect_photos(
+            &config.data,
+            config.target,
+            &config.cameras,
+            &config.output_dir,
+            true,
+        )?;
+        for line in crate::app::photos::summary(&run) {
+            eprintln!("{line}");
+        }
+        return Ok((run.dataset, None));
+    }
+    load_source(&config.data, config.target, &config.cameras)
+}
+
 /// Loads the dataset a data source names, for the given board and cameras.
+/// Photos need an output dir: use [`load_data`].
 pub fn load_source(
     source: &DataSource,
     target: Target,
@@ -25,6 +46,9 @@ pub fn load_source(
             let (d, _) = corners_vnl::read_corners_vnl(path, target, cameras.to_vec(), patterns)?;
             Ok((d, None))
         }
+        DataSource::Photos { .. } => Err(crate::error::Error::Invalid(
+            "photos are detected through source::load_data, which knows the output dir".into(),
+        )),
         DataSource::Synthetic {
             preset,
             images,

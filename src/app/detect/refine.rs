@@ -1,0 +1,209 @@
+//! Sub-pixel corner refinement (cornerSubPix-style) and its uncertainty.
+//!
+//! The ChESS corners from calib-targets are good to ~0.2 px, short of the
+//! 0.1 px calibration needs. At a true X-junction every image gradient in a
+//! small window is orthogonal to the vector from the corner to the pixel, so
+//! the corner is the least-squares point p minimising Σ w (gᵀ(q − p))². We
+//! iterate that on a window re-sampled (bilinearly) around the current
+//! estimate, like OpenCV's cornerSubPix, and keep the final normal matrix and
+//! residual to estimate a positional standard deviation for the weight.
+
+/// Grey image as f32, kept at full precision so 16-bit input is not rounded
+/// to 8 bits before refinement.
+pub struct FloatImage {
+    pub width: usize,
+    pub height: usize,
+    pub data: Vec<f32>,
+}
+
+impl FloatImage {
+    fn at(&self, x: usize, y: usize) -> f32 {
+        self.data[y * self.width + x]
+    }
+
+    /// Bilinear sample with clamp-to-edge, so windows touching the border
+    /// never read out of bounds.
+    pub fn sample(&self, x: f64, y: f64) -> f64 {
+        let xm = (self.width - 1) as f64;
+        let ym = (self.height - 1) as f64;
+        let x = x.clamp(0.0, xm);
+        let y = y.clamp(0.0, ym);
+        let (x0, y0) = (x.floor() as usize, y.floor() as usize);
+        let (x1, y1) = ((x0 + 1).min(self.width - 1), (y0 + 1).min(self.height - 1));
+        let (fx, fy) = (x - x0 as f64, y - y0 as f64);
+        let top = self.at(x0, y0) as f64 * (1.0 - fx) + self.at(x1, y0) as f64 * fx;
+        let bot = self.at(x0, y1) as f64 * (1.0 - fx) + self.at(x1, y1) as f64 * fx;
+        top * (1.0 - fy) + bot * fy
+    }
+
+    /// Mean of a few bilinear samples in a disc of radius `r` around (x, y);
+    /// used to read a square's brightness robustly against noise.
+    pub fn patch_mean(&self, x: f64, y: f64, r: f64) -> f64 {
+        let mut acc = 0.0;
+        let mut n = 0.0;
+        for dy in -2..=2 {
+            for dx in -2..=2 {
+                acc += self.sample(x + dx as f64 * r / 2.0, y + dy as f64 * r / 2.0);
+                n += 1.0;
+            }
+        }
+        acc / n
+    }
+}
+
+/// Result of refining one corner.
+#[derive(Clone, Copy, Debug)]
+pub struct Refined {
+    pub uv: [f64; 2],
+    /// Estimated 1-σ position error (px), largest axis.
+    pub sigma: f64,
+    /// Point-symmetry misfit in [0, ~2]: Σ(I(p+d) − I(p−d))² / Σ 2(I − Ī)² over
+    /// the window. An X-junction (under any locally affine view) is point
+    /// symmetric about its centre, so this is ~0 for a clean corner and large
+    /// when an occluder, a board edge or clutter enters the window.
+    pub asymmetry: f64,
+}
+
+const MAX_ITERS: usize = 30;
+const EPS: f64 = 1e-3;
+
+/// Refine `start` with a (2·half+1)² window. Returns None when the window has
+/// no usable gradient structure (flat or a single edge) or the estimate runs
+/// away by more than half a window — the caller then drops the corner rather
+/// than report a bad position.
+pub fn refine_corner(img: &FloatImage, start: [f64; 2], half: usize) -> Option<Refined> {
+    let mut p = start;
+    let mut last = None;
+    for _ in 0..MAX_ITERS {
+        // The system is in coordinates relative to p (large absolute pixel
+        // coordinates would cancel catastrophically in the residual).
+        let sys = normal_system(img, p, half)?;
+        let d = sys.solve()?;
+        p = [p[0] + d[0], p[1] + d[1]];
+        let step = (d[0] * d[0] + d[1] * d[1]).sqrt();
+        last = Some((sys, d));
+        if step < EPS {
+            break;
+        }
+    }
+    let moved = ((p[0] - start[0]).powi(2) + (p[1] - start[1]).powi(2)).sqrt();
+    if moved > half as f64 * 0.5 + 0.5 {
+        return None;
+    }
+    let (sys, d) = last?;
+    let sigma = sys.sigma_at(d)?;
+    Some(Refined {
+        uv: p,
+        sigma,
+        asymmetry: asymmetry(img, p, half),
+    })
+}
+
+fn asymmetry(img: &FloatImage, p: [f64; 2], half: usize) -> f64 {
+    let h = half as isize;
+    let mut vals = Vec::with_capacity(((2 * h + 1) * (h + 1)) as usize);
+    for dy in 0..=h {
+        for dx in -h..=h {
+            if dy == 0 && dx <= 0 {
+                continue;
+            }
+            let a = img.sample(p[0] + dx as f64, p[1] + dy as f64);
+            let b = img.sample(p[0] - dx as f64, p[1] - dy as f64);
+            vals.push((a, b));
+        }
+    }
+    let n = (2 * vals.len()) as f64;
+    let mean = vals.iter().map(|(a, b)| a + b).sum::<f64>() / n;
+    let var: f64 = vals
+        .iter()
+        .map(|(a, b)| (a - mean).powi(2) + (b - mean).powi(2))
+        .sum();
+    let diff: f64 = vals.iter().map(|(a, b)| (a - b).powi(2)).sum();
+    diff / var.max(1e-9)
+}
+
+/// Accumulated normal equations A d = b of one iteration (d relative to the
+/// window centre), plus the raw sums
+/// needed to evaluate the residual at the solution.
+struct NormalSystem {
+    a: [f64; 3], // symmetric: [a11, a12, a22]
+    b: [f64; 2],
+    /// Σ w (gᵀq)², to expand the residual Σ w (gᵀ(q − p))² without a second pass.
+    c: f64,
+    count: f64,
+}
+
+impl NormalSystem {
+    fn solve(&self) -> Option<[f64; 2]> {
+        let [a11, a12, a22] = self.a;
+        let det = a11 * a22 - a12 * a12;
+        // A near-singular A means a single straight edge: position along it is
+        // undetermined.
+        if det <= 1e-9 * (a11 + a22).powi(2) || det <= 0.0 {
+            return None;
+        }
+        Some([
+            (a22 * self.b[0] - a12 * self.b[1]) / det,
+            (a11 * self.b[1] - a12 * self.b[0]) / det,
+        ])
+    }
+
+    /// Covariance σ̂² A⁻¹ with σ̂² the weighted residual variance; returns the
+    /// square root of its largest eigenvalue.
+    fn sigma_at(&self, p: [f64; 2]) -> Option<f64> {
+        let [a11, a12, a22] = self.a;
+        let ap = [a11 * p[0] + a12 * p[1], a12 * p[0] + a22 * p[1]];
+        let resid =
+            (self.c - 2.0 * (p[0] * self.b[0] + p[1] * self.b[1]) + p[0] * ap[0] + p[1] * ap[1]).max(0.0);
+        // Rows are sqrt(w)-weighted, so the row variance is the weighted
+        // residual over the degrees of freedom.
+        let var = resid / (self.count - 2.0).max(1.0);
+        let det = a11 * a22 - a12 * a12;
+        if det <= 0.0 {
+            return None;
+        }
+        // Eigenvalues of A⁻¹ are 1/λ(A); the largest is 1/λ_min(A).
+        let tr = a11 + a22;
+        let lmin = 0.5 * (tr - (tr * tr - 4.0 * det).max(0.0).sqrt());
+        (lmin > 0.0).then(|| (var / lmin).sqrt())
+    }
+}
+
+fn normal_system(img: &FloatImage, p: [f64; 2], half: usize) -> Option<NormalSystem> {
+    let h = half as isize;
+    let side = (2 * h + 3) as usize;
+    // Resample a window one pixel wider than needed, centred on p, so central
+    // differences are available for every window pixel.
+    let mut win = vec![0.0; side * side];
+    for (k, v) in win.iter_mut().enumerate() {
+        let dx = (k % side) as f64 - (h + 1) as f64;
+        let dy = (k / side) as f64 - (h + 1) as f64;
+        *v = img.sample(p[0] + dx, p[1] + dy);
+    }
+    let sigma2 = 2.0 * (half as f64 * 0.5).powi(2).max(1.0);
+    let mut sys = NormalSystem {
+        a: [0.0; 3],
+        b: [0.0; 2],
+        c: 0.0,
+        count: 0.0,
+    };
+    for j in 1..side - 1 {
+        for i in 1..side - 1 {
+            let gx = 0.5 * (win[j * side + i + 1] - win[j * side + i - 1]);
+            let gy = 0.5 * (win[(j + 1) * side + i] - win[(j - 1) * side + i]);
+            let dx = i as f64 - (h + 1) as f64;
+            let dy = j as f64 - (h + 1) as f64;
+            let w = (-(dx * dx + dy * dy) / sigma2).exp();
+            let q = [dx, dy];
+            let gq = gx * q[0] + gy * q[1];
+            sys.a[0] += w * gx * gx;
+            sys.a[1] += w * gx * gy;
+            sys.a[2] += w * gy * gy;
+            sys.b[0] += w * gx * gq;
+            sys.b[1] += w * gy * gq;
+            sys.c += w * gq * gq;
+            sys.count += 1.0;
+        }
+    }
+    (sys.a[0] + sys.a[2] > 0.0).then_some(sys)
+}

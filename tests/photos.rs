@@ -1,0 +1,218 @@
+//! Photos in, end to end through the real binary and the real solver: rendered
+//! photos of a 9×6 board through a known camera → `deformcal --config` → intrinsics
+//! close to the truth; detections.csv, the cache on a rerun, non-image files
+//! skipped, several cameras with PNG 16 bit, TIFF and JPEG, and `deformcal detect`.
+mod detect_common;
+
+use deformcal::app::detect::render::render_board;
+use detect_common::*;
+use image::{DynamicImage, ImageBuffer, Luma};
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn deformcal(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_deformcal"))
+        .args(args)
+        .output()
+        .expect("run deformcal")
+}
+
+/// Varied, well-tilted views (so the focal length is observable), some boards bent
+/// and some partly out of view; (rotation, distance, shift, bend).
+fn views() -> Vec<([f64; 3], f64, [f64; 2], f64)> {
+    vec![
+        ([0.45, -0.1, 0.05], 0.55, [0.0, 0.0], 0.0),
+        ([-0.4, 0.2, 0.1], 0.55, [0.02, 0.01], 0.003),
+        ([0.1, 0.5, -0.1], 0.6, [-0.03, 0.0], 0.0),
+        ([0.2, -0.45, 0.2], 0.5, [0.03, -0.02], 0.0),
+        ([-0.3, -0.35, 1.6], 0.6, [0.0, 0.03], 0.002),
+        ([0.35, 0.35, -0.2], 0.45, [-0.05, -0.04], 0.0),
+        ([-0.5, 0.0, 0.0], 0.6, [0.05, 0.05], 0.0),
+        ([0.0, 0.45, 3.0], 0.5, [0.06, -0.05], 0.0),
+        ([0.25, 0.25, 0.3], 0.42, [-0.17, 0.0], 0.0),
+        ([0.3, -0.3, -0.1], 0.5, [-0.06, 0.05], 0.003),
+    ]
+}
+
+/// Renders the views as 8-bit PNGs `dir/<prefix>-NN.png`.
+fn write_photos(dir: &Path, prefix: &str) {
+    std::fs::create_dir_all(dir).unwrap();
+    for (k, (rvec, dist, shift, bend)) in views().into_iter().enumerate() {
+        let mut sc = scene(6, 9, rvec, dist, shift);
+        sc.bend = bend;
+        sc.seed = k as u64;
+        sc.supersample = 4;
+        let (img, _) = render_board(&sc);
+        img.save(dir.join(format!("{prefix}-{k:02}.png"))).unwrap();
+    }
+}
+
+const BOARD: &str = "[target]\nrows = 6\ncols = 9\nspacing = 0.03\n";
+
+#[test]
+fn photos_to_intrinsics_with_cache_and_report() {
+    let dir = tempfile::tempdir().unwrap();
+    write_photos(&dir.path().join("photos"), "img");
+    std::fs::write(dir.path().join("photos/img-99.png"), b"not a picture").unwrap();
+    let config = dir.path().join("c.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "{BOARD}[[cameras]]\nname = \"cam0\"\nwidth = {W}\nheight = {H}\nmodel = \"radial3\"\n\
+             [data]\nphotos = \"photos/img-*.png\"\n[calibration]\nmethod = \"standard\"\n[output]\ndir = \"out\"\n"
+        ),
+    )
+    .unwrap();
+    let out = deformcal(&["--config", config.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("skipped photos/img-99.png: unreadable"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("board found in 10 of 11 images"), "{stderr}");
+
+    let json: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(dir.path().join("out/calibration.json")).unwrap(),
+    )
+    .unwrap();
+    let k = &json["cameras"][0]["intrinsics"];
+    let cam = camera();
+    let f = |n: &str| k[n].as_f64().unwrap();
+    eprintln!(
+        "fx {} fy {} cx {} cy {} k1 {} k2 {} rmse {}",
+        f("fx"),
+        f("fy"),
+        f("cx"),
+        f("cy"),
+        f("k1"),
+        f("k2"),
+        json["rmse_px"]
+    );
+    assert!((f("fx") / cam.fx - 1.0).abs() < 0.003, "fx {}", f("fx"));
+    assert!((f("fy") / cam.fy - 1.0).abs() < 0.003, "fy {}", f("fy"));
+    assert!((f("cx") - cam.cx).abs() < 1.0, "cx {}", f("cx"));
+    assert!((f("cy") - cam.cy).abs() < 1.0, "cy {}", f("cy"));
+    assert!((f("k1") - cam.k1).abs() < 0.01, "k1 {}", f("k1"));
+    assert!(json["rmse_px"].as_f64().unwrap() < 0.1);
+
+    let csv = std::fs::read_to_string(dir.path().join("out/detections.csv")).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines[0], "file,camera,frame,corners,status,reason");
+    assert_eq!(lines.len(), 12, "{csv}");
+    assert!(lines[1].starts_with("photos/img-00.png,cam0,0,54,complete,"));
+    assert!(
+        lines.iter().any(|l| l.contains(",partial,")),
+        "the board cut by the image edge: {csv}"
+    );
+    assert!(lines[11].starts_with("photos/img-99.png,cam0,10,0,unreadable,"));
+    let obs = std::fs::read_to_string(dir.path().join("out/observations.csv")).unwrap();
+    assert!(obs.starts_with("camera,frame,corner,u,v\n"));
+
+    // Unchanged photos: nothing is detected again, and the result is the same.
+    let again = deformcal(&["--config", config.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&again.stderr);
+    assert!(again.status.success(), "{stderr}");
+    assert!(stderr.contains("11 reused from the cache"), "{stderr}");
+    let json2: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(dir.path().join("out/calibration.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(json["cameras"], json2["cameras"]);
+    // A changed photo is detected again; the others still come from the cache.
+    let p = dir.path().join("photos/img-03.png");
+    let img = image::open(&p).unwrap().to_luma8();
+    let flipped = ImageBuffer::from_fn(img.width(), img.height(), |x, y| {
+        *img.get_pixel(img.width() - 1 - x, y)
+    });
+    flipped.save(&p).unwrap();
+    let third = deformcal(&["--config", config.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&third.stderr);
+    assert!(stderr.contains("10 reused from the cache"), "{stderr}");
+}
+
+#[test]
+fn two_cameras_any_format_and_detect_only() {
+    let dir = tempfile::tempdir().unwrap();
+    let photos = dir.path().join("photos");
+    write_photos(&photos, "left");
+    write_photos(&photos, "right");
+    // The right camera's photos as 16-bit TIFF and colour JPEG, 8-bit PNG for the left.
+    for k in 0..views().len() {
+        let p = photos.join(format!("right-{k:02}.png"));
+        let img = image::open(&p).unwrap().to_luma8();
+        std::fs::remove_file(&p).unwrap();
+        if k % 2 == 0 {
+            let g16: ImageBuffer<Luma<u16>, Vec<u16>> =
+                ImageBuffer::from_fn(img.width(), img.height(), |x, y| {
+                    Luma([img.get_pixel(x, y)[0] as u16 * 257])
+                });
+            DynamicImage::ImageLuma16(g16)
+                .save(photos.join(format!("right-{k:02}.tif")))
+                .unwrap();
+        } else {
+            DynamicImage::ImageLuma8(img)
+                .to_rgb8()
+                .save(photos.join(format!("right-{k:02}.jpg")))
+                .unwrap();
+        }
+    }
+    // Camera 1 misses time step 07: frames still pair by what `*` matched.
+    std::fs::remove_file(photos.join("right-07.jpg")).unwrap();
+    let config = dir.path().join("c.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "{BOARD}[[cameras]]\nname = \"cam0\"\nwidth = {W}\nheight = {H}\n\
+             [[cameras]]\nname = \"cam1\"\nwidth = {W}\nheight = {H}\n\
+             [data]\nphotos = {{ cam0 = \"photos/left-*.png\", cam1 = \"photos/right-*\" }}\n[output]\ndir = \"out\"\n"
+        ),
+    )
+    .unwrap();
+    let obs = dir.path().join("obs.csv");
+    let out = deformcal(&[
+        "detect",
+        "--config",
+        config.to_str().unwrap(),
+        "--out",
+        obs.to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("board found in 19 of 19 images"), "{stderr}");
+    let csv = std::fs::read_to_string(dir.path().join("out/detections.csv")).unwrap();
+    assert!(csv.contains("photos/right-08.tif,cam1,8,"), "{csv}");
+    assert!(csv.contains("photos/right-09.jpg,cam1,9,"), "{csv}");
+    assert!(csv.contains("photos/left-07.png,cam0,7,"), "{csv}");
+    assert!(!csv.contains("right-07"), "{csv}");
+    let text = std::fs::read_to_string(&obs).unwrap();
+    assert!(text.contains("\ncam1,8,0,"), "16-bit TIFF detected");
+    assert!(text.contains("\ncam1,9,0,"), "colour JPEG detected");
+    assert!(
+        !dir.path().join("out/calibration.json").exists(),
+        "detect only"
+    );
+}
+
+#[test]
+fn a_photo_of_another_size_is_rejected() {
+    let dir = tempfile::tempdir().unwrap();
+    write_photos(&dir.path().join("photos"), "img");
+    let config = dir.path().join("c.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "{BOARD}[[cameras]]\nname = \"cam0\"\nwidth = 1024\nheight = 768\n\
+             [data]\nphotos = \"photos/*.png\"\n[output]\ndir = \"out\"\n"
+        ),
+    )
+    .unwrap();
+    let out = deformcal(&["--config", config.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.starts_with("error: photos `photos/*.png`") && stderr.contains("800x600"),
+        "{stderr}"
+    );
+    assert!(!dir.path().join("out").exists());
+}
