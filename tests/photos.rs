@@ -59,7 +59,7 @@ fn photos_to_intrinsics_with_cache_and_report() {
         &config,
         format!(
             "{BOARD}[[cameras]]\nname = \"cam0\"\nwidth = {W}\nheight = {H}\nmodel = \"radial3\"\n\
-             [data]\nphotos = \"photos/img-*.png\"\n[calibration]\nmethod = \"standard\"\n[output]\ndir = \"out\"\n"
+             [data]\nphotos = \"photos/img-*.png\"\n[calibration]\nmethod = \"dynamic\"\n[output]\ndir = \"out\"\n"
         ),
     )
     .unwrap();
@@ -137,35 +137,33 @@ fn two_cameras_any_format_and_detect_only() {
     let photos = dir.path().join("photos");
     write_photos(&photos, "left");
     write_photos(&photos, "right");
-    // The right camera's photos as 16-bit TIFF and colour JPEG, 8-bit PNG for the left.
+    // The left camera's photos as colour JPEG, the right one's as 16-bit TIFF.
     for k in 0..views().len() {
-        let p = photos.join(format!("right-{k:02}.png"));
-        let img = image::open(&p).unwrap().to_luma8();
-        std::fs::remove_file(&p).unwrap();
-        if k % 2 == 0 {
-            let g16: ImageBuffer<Luma<u16>, Vec<u16>> =
-                ImageBuffer::from_fn(img.width(), img.height(), |x, y| {
-                    Luma([img.get_pixel(x, y)[0] as u16 * 257])
-                });
-            DynamicImage::ImageLuma16(g16)
-                .save(photos.join(format!("right-{k:02}.tif")))
-                .unwrap();
-        } else {
-            DynamicImage::ImageLuma8(img)
-                .to_rgb8()
-                .save(photos.join(format!("right-{k:02}.jpg")))
-                .unwrap();
+        for (side, ext) in [("left", "jpg"), ("right", "tif")] {
+            let p = photos.join(format!("{side}-{k:02}.png"));
+            let img = image::open(&p).unwrap().to_luma8();
+            std::fs::remove_file(&p).unwrap();
+            let out = photos.join(format!("{side}-{k:02}.{ext}"));
+            if side == "right" {
+                let g16: ImageBuffer<Luma<u16>, Vec<u16>> =
+                    ImageBuffer::from_fn(img.width(), img.height(), |x, y| {
+                        Luma([img.get_pixel(x, y)[0] as u16 * 257])
+                    });
+                DynamicImage::ImageLuma16(g16).save(out).unwrap();
+            } else {
+                DynamicImage::ImageLuma8(img).to_rgb8().save(out).unwrap();
+            }
         }
     }
     // Camera 1 misses time step 07: frames still pair by what `*` matched.
-    std::fs::remove_file(photos.join("right-07.jpg")).unwrap();
+    std::fs::remove_file(photos.join("right-07.tif")).unwrap();
     let config = dir.path().join("c.toml");
     std::fs::write(
         &config,
         format!(
             "{BOARD}[[cameras]]\nname = \"cam0\"\nwidth = {W}\nheight = {H}\n\
              [[cameras]]\nname = \"cam1\"\nwidth = {W}\nheight = {H}\n\
-             [data]\nphotos = {{ cam0 = \"photos/left-*.png\", cam1 = \"photos/right-*\" }}\n[output]\ndir = \"out\"\n"
+             [data]\nphotos = {{ cam0 = \"photos/left-*.jpg\", cam1 = \"photos/right-*.tif\" }}\n[output]\ndir = \"out\"\n"
         ),
     )
     .unwrap();
@@ -182,12 +180,12 @@ fn two_cameras_any_format_and_detect_only() {
     assert!(stderr.contains("board found in 19 of 19 images"), "{stderr}");
     let csv = std::fs::read_to_string(dir.path().join("out/detections.csv")).unwrap();
     assert!(csv.contains("photos/right-08.tif,cam1,8,"), "{csv}");
-    assert!(csv.contains("photos/right-09.jpg,cam1,9,"), "{csv}");
-    assert!(csv.contains("photos/left-07.png,cam0,7,"), "{csv}");
+    assert!(csv.contains("photos/left-09.jpg,cam0,9,"), "{csv}");
+    assert!(csv.contains("photos/left-07.jpg,cam0,7,"), "{csv}");
     assert!(!csv.contains("right-07"), "{csv}");
     let text = std::fs::read_to_string(&obs).unwrap();
-    assert!(text.contains("\ncam1,8,0,"), "16-bit TIFF detected");
-    assert!(text.contains("\ncam1,9,0,"), "colour JPEG detected");
+    assert!(text.contains("\ncam1,0,0,"), "16-bit TIFF detected");
+    assert!(text.contains("\ncam0,9,0,"), "colour JPEG detected");
     assert!(
         !dir.path().join("out/calibration.json").exists(),
         "detect only"
