@@ -14,7 +14,11 @@ const REPEATS: usize = 3;
 
 /// A 9×6 board, 30 mm squares, in one of a few poses, at 1280×960.
 fn scene(k: usize) -> Scene {
-    let rvec = [0.3 - 0.1 * k as f64, 0.2 * (k % 3) as f64 - 0.2, 0.4 * k as f64];
+    let rvec = [
+        0.3 - 0.1 * k as f64,
+        0.2 * (k % 3) as f64 - 0.2,
+        0.4 * k as f64,
+    ];
     let (w, h, s) = (8.0 * 0.03, 5.0 * 0.03, 0.03);
     let r = rodrigues(rvec);
     let c: Vec<f64> = (0..3)
@@ -124,7 +128,9 @@ fn main() {
     samples.retain(|p| p.extension().is_some_and(|e| e == "jpg"));
     samples.sort();
     if samples.is_empty() {
-        println!("OpenCV sample photos: not cached (run cargo test --release --test opencv_photos)");
+        println!(
+            "OpenCV sample photos: not cached (run cargo test --release --test opencv_photos)"
+        );
     } else {
         bench("OpenCV sample photos, 640x480", &samples);
     }

@@ -241,7 +241,10 @@ fn run_detect(args: DetectArgs) -> Result<()> {
         config.output_dir = o;
     }
     anyhow::ensure!(
-        matches!(config.data, deformcal::app::config::DataSource::Photos { .. }),
+        matches!(
+            config.data,
+            deformcal::app::config::DataSource::Photos { .. }
+        ),
         "{}: [data] has no `photos` to detect the board in",
         args.config.display()
     );

@@ -2,9 +2,9 @@
 //! indexing, partial views, ambiguity and failure reasons.
 mod detect_common;
 
-use detect_common::*;
 use deformcal::app::detect::render::render_board;
-use deformcal::app::detect::{Detector, Rejection, detect_image};
+use deformcal::app::detect::{detect_image, Detector, Rejection};
+use detect_common::*;
 use image::DynamicImage;
 
 /// Fully visible boards in varied poses must be found complete, indexed
@@ -52,14 +52,21 @@ fn bent_board_with_distortion() {
 /// tie-break must put board +x towards image +u.
 #[test]
 fn square_boards() {
-    for (n, rvec) in [(7, [0.2, 0.3, 2.0]), (8, [-0.3, 0.2, 3.0]), (8, [0.1, -0.2, 0.4])] {
+    for (n, rvec) in [
+        (7, [0.2, 0.3, 2.0]),
+        (8, [-0.3, 0.2, 3.0]),
+        (8, [0.1, -0.2, 0.4]),
+    ] {
         let (det, truth) = run(&scene(n, n, rvec, 0.55, [0.0, 0.0]));
         let det = det.unwrap_or_else(|e| panic!("{n}x{n}: {e}"));
         assert!(det.complete);
         let rms = rms_if_indexed(&det, &truth, n, n).expect("indexing up to symmetry");
         assert!(rms <= 0.1, "{n}x{n}: rms {rms}");
         let (a, b) = (det.corners[0].uv, det.corners[n - 1].uv);
-        assert!(b[0] - a[0] > 0.0, "{n}x{n}: +x must point right (tie-break rule)");
+        assert!(
+            b[0] - a[0] > 0.0,
+            "{n}x{n}: +x must point right (tie-break rule)"
+        );
     }
 }
 
@@ -151,7 +158,10 @@ fn bit_depths_and_colour_agree() {
 fn weights_are_in_range() {
     let (det, _) = run(&scene(6, 9, [0.2, 0.1, 0.0], 0.55, [0.0, 0.0]));
     for c in det.expect("found").corners {
-        assert!(c.weight > 0.0 && c.weight <= 1.0 && c.sigma.is_finite(), "{c:?}");
+        assert!(
+            c.weight > 0.0 && c.weight <= 1.0 && c.sigma.is_finite(),
+            "{c:?}"
+        );
     }
 }
 
@@ -246,8 +256,16 @@ fn mixed_set_accuracy() {
         let a = k as f64;
         let rvec = [0.4 * (a * 1.3).sin(), 0.4 * (a * 0.7).cos(), 0.5 * a];
         let cut = k % 4 == 3;
-        let shift = if cut { [-0.17, 0.0] } else { [0.01 * a.sin(), 0.0] };
-        let dist = if cut { 0.45 } else { 0.5 + 0.02 * (k % 3) as f64 };
+        let shift = if cut {
+            [-0.17, 0.0]
+        } else {
+            [0.01 * a.sin(), 0.0]
+        };
+        let dist = if cut {
+            0.45
+        } else {
+            0.5 + 0.02 * (k % 3) as f64
+        };
         let mut sc = scene(6, 9, [rvec[0] * 0.4, rvec[1] * 0.4, rvec[2]], dist, shift);
         sc.bend = [0.0, 0.003, -0.004][k % 3];
         sc.blur = 0.7 + 0.1 * (k % 4) as f64;
@@ -267,6 +285,9 @@ fn mixed_set_accuracy() {
     }
     let rms = (se / n as f64).sqrt();
     eprintln!("mixed set: {n} corners ({partial} partial boards), RMS to truth {rms:.3} px");
-    assert!(partial >= 2, "the set must hold boards cut by the image edge");
+    assert!(
+        partial >= 2,
+        "the set must hold boards cut by the image edge"
+    );
     assert!(rms <= 0.1, "rms {rms}");
 }

@@ -1,5 +1,5 @@
 //! Bad input must give a `Rejection`, never a panic.
-use deformcal::app::detect::{Detector, Rejection, detect_file, detect_image};
+use deformcal::app::detect::{detect_file, detect_image, Detector, Rejection};
 use image::DynamicImage;
 use std::path::PathBuf;
 
@@ -67,7 +67,10 @@ fn unreadable_files_are_errors() {
         ),
         ("truncated.png", good[..good.len() / 2].to_vec()),
         ("header_only.png", png_header_only(640, 480)),
-        ("truncated.jpg", b"\xff\xd8\xff\xe0\x00\x10JFIF\x00".to_vec()),
+        (
+            "truncated.jpg",
+            b"\xff\xd8\xff\xe0\x00\x10JFIF\x00".to_vec(),
+        ),
     ];
     for (name, bytes) in cases {
         let r = detect_file(&tmp(name, &bytes), 6, 9);

@@ -108,51 +108,13 @@ fn opencv_sample_photos() {
             return;
         }
     };
-    let all = images(&photos, "");
-    assert_eq!(all.len(), 26, "left01…right14 without 10");
-
-    // Boards found: every sample photo, ours against OpenCV's classic detector.
     let dir = tempfile::tempdir().unwrap();
-    let write_config = |name: &str, pattern: &str| {
-        let p = dir.path().join(name);
-        std::fs::write(
-            &p,
-            format!(
-                "[target]\nrows = 6\ncols = 9\nspacing = 0.025\n\
-                 [[cameras]]\nname = \"cam0\"\nwidth = 640\nheight = 480\nmodel = \"opencv5\"\n\
-                 [data]\nphotos = \"{}/{pattern}\"\n\
-                 [calibration]\nmethod = \"standard\"\nloss = \"none\"\n\
-                 [output]\ndir = \"out-{name}\"\n",
-                photos.display()
-            ),
-        )
-        .unwrap();
-        p
-    };
-    let config = write_config("all.toml", "*.jpg");
-    let out = Command::new(env!("CARGO_BIN_EXE_deformcal"))
-        .args(["detect", "--config", config.to_str().unwrap()])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let csv = std::fs::read_to_string(dir.path().join("out-all.toml/detections.csv")).unwrap();
-    let ours = csv
-        .lines()
-        .skip(1)
-        .filter(|l| l.contains(",complete,") || l.contains(",partial,"))
-        .count();
-    let cv = opencv(&all);
-    let theirs = cv["found"].as_array().unwrap().len();
-    eprintln!("boards found in the 26 sample photos: ours {ours}, OpenCV {theirs}");
-    assert!(ours >= theirs, "ours {ours} < OpenCV {theirs}\n{csv}");
+
+    boards_found(dir.path(), &photos);
 
     // Calibration of the left camera: `standard` on our corners against OpenCV's
     // calibrateCamera on OpenCV's corners.
-    let config = write_config("left.toml", "left*.jpg");
+    let config = write_config(dir.path(), &photos, "left.toml", "left*.jpg");
     let out = Command::new(env!("CARGO_BIN_EXE_deformcal"))
         .args(["--config", config.to_str().unwrap()])
         .output()
@@ -206,6 +168,50 @@ fn opencv_sample_photos() {
     }
 }
 
+/// A config detecting `pattern` in the photos, `standard` with opencv5, no loss.
+fn write_config(dir: &Path, photos: &Path, name: &str, pattern: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(
+        &p,
+        format!(
+            "[target]\nrows = 6\ncols = 9\nspacing = 0.025\n\
+             [[cameras]]\nname = \"cam0\"\nwidth = 640\nheight = 480\nmodel = \"opencv5\"\n\
+             [data]\nphotos = \"{}/{pattern}\"\n\
+             [calibration]\nmethod = \"standard\"\nloss = \"none\"\n\
+             [output]\ndir = \"out-{name}\"\n",
+            photos.display()
+        ),
+    )
+    .unwrap();
+    p
+}
+
+/// Boards found in all 26 photos: ours at least as many as OpenCV's classic detector.
+fn boards_found(dir: &Path, photos: &Path) {
+    let all = images(photos, "");
+    assert_eq!(all.len(), 26, "left01…right14 without 10");
+    let config = write_config(dir, photos, "all.toml", "*.jpg");
+    let out = Command::new(env!("CARGO_BIN_EXE_deformcal"))
+        .args(["detect", "--config", config.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let csv = std::fs::read_to_string(dir.join("out-all.toml/detections.csv")).unwrap();
+    let ours = csv
+        .lines()
+        .skip(1)
+        .filter(|l| l.contains(",complete,") || l.contains(",partial,"))
+        .count();
+    let cv = opencv(&all);
+    let theirs = cv["found"].as_array().unwrap().len();
+    eprintln!("boards found in the 26 sample photos: ours {ours}, OpenCV {theirs}");
+    assert!(ours >= theirs, "ours {ours} < OpenCV {theirs}\n{csv}");
+}
+
 /// Photos in which some OpenCV corner lies more than 1 px from ours, with the
 /// largest distance; `out` holds our detections.csv and observations.csv.
 fn gross_disagreements(cv: &serde_json::Value, out: &Path) -> Vec<(String, f64)> {
@@ -229,7 +235,10 @@ fn gross_disagreements(cv: &serde_json::Value, out: &Path) -> Vec<(String, f64)>
         let Some(c) = cv["corners"][name.as_str()].as_array() else {
             continue;
         };
-        let (cu, cv) = (c[corner][0].as_f64().unwrap(), c[corner][1].as_f64().unwrap());
+        let (cu, cv) = (
+            c[corner][0].as_f64().unwrap(),
+            c[corner][1].as_f64().unwrap(),
+        );
         let d = (u - cu).hypot(v - cv);
         let w = worst.entry(name.clone()).or_insert(0.0);
         *w = w.max(d);

@@ -70,12 +70,14 @@ fn photos_to_intrinsics_with_cache_and_report() {
         stderr.contains("skipped photos/img-99.png: unreadable"),
         "{stderr}"
     );
-    assert!(stderr.contains("board found in 10 of 11 images"), "{stderr}");
+    assert!(
+        stderr.contains("board found in 10 of 11 images"),
+        "{stderr}"
+    );
 
-    let json: serde_json::Value = serde_json::from_slice(
-        &std::fs::read(dir.path().join("out/calibration.json")).unwrap(),
-    )
-    .unwrap();
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("out/calibration.json")).unwrap())
+            .unwrap();
     let k = &json["cameras"][0]["intrinsics"];
     let cam = camera();
     let f = |n: &str| k[n].as_f64().unwrap();
@@ -114,10 +116,9 @@ fn photos_to_intrinsics_with_cache_and_report() {
     let stderr = String::from_utf8_lossy(&again.stderr);
     assert!(again.status.success(), "{stderr}");
     assert!(stderr.contains("11 reused from the cache"), "{stderr}");
-    let json2: serde_json::Value = serde_json::from_slice(
-        &std::fs::read(dir.path().join("out/calibration.json")).unwrap(),
-    )
-    .unwrap();
+    let json2: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("out/calibration.json")).unwrap())
+            .unwrap();
     assert_eq!(json["cameras"], json2["cameras"]);
     // A changed photo is detected again; the others still come from the cache.
     let p = dir.path().join("photos/img-03.png");
@@ -177,7 +178,10 @@ fn two_cameras_any_format_and_detect_only() {
     ]);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{stderr}");
-    assert!(stderr.contains("board found in 19 of 19 images"), "{stderr}");
+    assert!(
+        stderr.contains("board found in 19 of 19 images"),
+        "{stderr}"
+    );
     let csv = std::fs::read_to_string(dir.path().join("out/detections.csv")).unwrap();
     assert!(csv.contains("photos/right-08.tif,cam1,8,"), "{csv}");
     assert!(csv.contains("photos/left-09.jpg,cam0,9,"), "{csv}");

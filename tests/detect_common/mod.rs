@@ -2,8 +2,8 @@
 //! and checks of a detection against rendered truth.
 #![allow(dead_code)]
 
-use deformcal::app::detect::render::{Camera, Pose, Scene, render_board, rodrigues};
-use deformcal::app::detect::{Detection, detect_image};
+use deformcal::app::detect::render::{render_board, rodrigues, Camera, Pose, Scene};
+use deformcal::app::detect::{detect_image, Detection};
 
 pub const W: u32 = 800;
 pub const H: u32 = 600;
@@ -25,7 +25,9 @@ pub fn scene(rows: usize, cols: usize, rvec: [f64; 3], dist: f64, shift: [f64; 2
     let s = 0.03;
     let (w, h) = ((cols - 1) as f64 * s, (rows - 1) as f64 * s);
     let r = rodrigues(rvec);
-    let c: Vec<f64> = (0..3).map(|i| r[i][0] * w / 2.0 + r[i][1] * h / 2.0).collect();
+    let c: Vec<f64> = (0..3)
+        .map(|i| r[i][0] * w / 2.0 + r[i][1] * h / 2.0)
+        .collect();
     Scene {
         camera: camera(),
         pose: Pose {
@@ -64,7 +66,12 @@ pub fn symmetries(rows: usize, cols: usize) -> Vec<IndexMap> {
 /// RMS error of the detection against truth under the first index map that
 /// puts every corner within 1 px of its truth; None if no map does (wrong
 /// indexing).
-pub fn rms_if_indexed(det: &Detection, truth: &[Option<[f64; 2]>], rows: usize, cols: usize) -> Option<f64> {
+pub fn rms_if_indexed(
+    det: &Detection,
+    truth: &[Option<[f64; 2]>],
+    rows: usize,
+    cols: usize,
+) -> Option<f64> {
     symmetries(rows, cols).iter().find_map(|f| {
         let mut se = 0.0;
         for c in &det.corners {
@@ -89,7 +96,11 @@ pub fn run(
 ) {
     let (img, truth) = render_board(scene);
     (
-        detect_image(&image::DynamicImage::ImageLuma8(img), scene.rows, scene.cols),
+        detect_image(
+            &image::DynamicImage::ImageLuma8(img),
+            scene.rows,
+            scene.cols,
+        ),
         truth,
     )
 }

@@ -6,8 +6,8 @@
 //! budget before decoding, and also cap the decoder's allocation in case the
 //! header lies.
 
-use crate::app::detect::Rejection;
 use crate::app::detect::refine::FloatImage;
+use crate::app::detect::Rejection;
 use image::{DynamicImage, GrayImage, ImageReader, Limits};
 use std::io::Cursor;
 use std::path::Path;
@@ -27,10 +27,13 @@ pub fn load(path: &Path, max_pixels: u64) -> Result<DynamicImage, Rejection> {
 
 /// The bytes of an image file, refusing files over [`MAX_FILE_BYTES`].
 pub fn read_file(path: &Path) -> Result<Vec<u8>, Rejection> {
-    let unreadable = |e: &dyn std::fmt::Display| Rejection::Unreadable(format!("{}: {e}", path.display()));
+    let unreadable =
+        |e: &dyn std::fmt::Display| Rejection::Unreadable(format!("{}: {e}", path.display()));
     let size = std::fs::metadata(path).map_err(|e| unreadable(&e))?.len();
     if size > MAX_FILE_BYTES {
-        return Err(unreadable(&format!("file of {size} bytes exceeds {MAX_FILE_BYTES}")));
+        return Err(unreadable(&format!(
+            "file of {size} bytes exceeds {MAX_FILE_BYTES}"
+        )));
     }
     std::fs::read(path).map_err(|e| unreadable(&e))
 }
@@ -38,7 +41,8 @@ pub fn read_file(path: &Path) -> Result<Vec<u8>, Rejection> {
 /// Decode an image file's bytes (`path` only names it in messages), refusing
 /// images over `max_pixels`. The format comes from the content, not the name.
 pub fn load_bytes(bytes: &[u8], path: &Path, max_pixels: u64) -> Result<DynamicImage, Rejection> {
-    let unreadable = |e: &dyn std::fmt::Display| Rejection::Unreadable(format!("{}: {e}", path.display()));
+    let unreadable =
+        |e: &dyn std::fmt::Display| Rejection::Unreadable(format!("{}: {e}", path.display()));
     let open = || -> Result<ImageReader<_>, Rejection> {
         ImageReader::new(Cursor::new(bytes))
             .with_guessed_format()
@@ -58,7 +62,9 @@ pub fn load_bytes(bytes: &[u8], path: &Path, max_pixels: u64) -> Result<DynamicI
 /// Refuse empty images and images over the pixel budget.
 pub fn check_size(width: u32, height: u32, max_pixels: u64) -> Result<(), Rejection> {
     if width == 0 || height == 0 {
-        return Err(Rejection::Unreadable(format!("empty image {width}x{height}")));
+        return Err(Rejection::Unreadable(format!(
+            "empty image {width}x{height}"
+        )));
     }
     if width as u64 * height as u64 > max_pixels {
         return Err(Rejection::TooLarge {
@@ -102,11 +108,16 @@ pub fn to_gray8(f: &FloatImage) -> GrayImage {
             / 1023.0
     };
     let (lo, hi) = (pct(0.005), pct(0.995));
-    let scale = if hi - lo > 1.0 { 255.0 / (hi - lo) } else { 1.0 };
+    let scale = if hi - lo > 1.0 {
+        255.0 / (hi - lo)
+    } else {
+        1.0
+    };
     let data = f
         .data
         .iter()
         .map(|&v| ((v - lo) * scale).round().clamp(0.0, 255.0) as u8)
         .collect();
-    GrayImage::from_raw(f.width as u32, f.height as u32, data).expect("buffer has width*height bytes")
+    GrayImage::from_raw(f.width as u32, f.height as u32, data)
+        .expect("buffer has width*height bytes")
 }

@@ -148,7 +148,12 @@ impl Default for Detector {
 
 impl Detector {
     /// Load and detect. Never panics; every failure is a [`Rejection`].
-    pub fn detect_file(&self, path: &Path, rows: usize, cols: usize) -> Result<Detection, Rejection> {
+    pub fn detect_file(
+        &self,
+        path: &Path,
+        rows: usize,
+        cols: usize,
+    ) -> Result<Detection, Rejection> {
         let img = load::load(path, self.max_pixels)?;
         self.detect_image(&img, rows, cols)
     }
@@ -170,6 +175,10 @@ pub fn detect_file(path: &Path, rows: usize, cols: usize) -> Result<Detection, R
 }
 
 /// [`Detector::detect_image`] with default settings.
-pub fn detect_image(img: &image::DynamicImage, rows: usize, cols: usize) -> Result<Detection, Rejection> {
+pub fn detect_image(
+    img: &image::DynamicImage,
+    rows: usize,
+    cols: usize,
+) -> Result<Detection, Rejection> {
     Detector::default().detect_image(img, rows, cols)
 }

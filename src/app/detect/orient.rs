@@ -31,8 +31,11 @@ use std::collections::HashMap;
 /// A labelled, refined corner from the detector, before indexing.
 #[derive(Clone, Copy, Debug)]
 pub struct Labelled {
+    /// Grid label along the detector's first axis.
     pub u: i32,
+    /// Grid label along the detector's second axis.
     pub v: i32,
+    /// Pixel position.
     pub uv: [f64; 2],
     /// Refinement uncertainty, carried through untouched.
     pub sigma: f64,
@@ -168,11 +171,25 @@ fn placements(nu: i32, nv: i32, rows: i32, cols: i32) -> impl Iterator<Item = Pl
         for su in [1, -1] {
             for sv in [1, -1] {
                 // For s = 1, t ∈ [0, n_board − n]; for s = −1, t ∈ [n − 1, n_board − 1].
-                let tcs = if su > 0 { 0..=cols - na } else { na - 1..=cols - 1 };
+                let tcs = if su > 0 {
+                    0..=cols - na
+                } else {
+                    na - 1..=cols - 1
+                };
                 for tc in tcs {
-                    let trs = if sv > 0 { 0..=rows - nb } else { nb - 1..=rows - 1 };
+                    let trs = if sv > 0 {
+                        0..=rows - nb
+                    } else {
+                        nb - 1..=rows - 1
+                    };
                     for tr in trs {
-                        out.push(Placement { swap, su, sv, tc, tr });
+                        out.push(Placement {
+                            swap,
+                            su,
+                            sv,
+                            tc,
+                            tr,
+                        });
                     }
                 }
             }
@@ -235,7 +252,10 @@ impl Grid {
         let v0 = corners.iter().map(|c| c.v).min().unwrap_or(0);
         let nu = corners.iter().map(|c| c.u - u0 + 1).max().unwrap_or(0);
         let nv = corners.iter().map(|c| c.v - v0 + 1).max().unwrap_or(0);
-        let at = corners.iter().map(|c| ((c.u - u0, c.v - v0), c.uv)).collect();
+        let at = corners
+            .iter()
+            .map(|c| ((c.u - u0, c.v - v0), c.uv))
+            .collect();
         Grid { u0, v0, nu, nv, at }
     }
 
@@ -264,7 +284,8 @@ impl Grid {
     fn cells(&self, img: &FloatImage) -> Vec<((i32, i32), f64)> {
         let mut out = Vec::new();
         for &(u, v) in self.at.keys() {
-            let quad = [(u, v), (u + 1, v), (u, v + 1), (u + 1, v + 1)].map(|(a, b)| self.get(a, b));
+            let quad =
+                [(u, v), (u + 1, v), (u, v + 1), (u + 1, v + 1)].map(|(a, b)| self.get(a, b));
             if let [Some(a), Some(b), Some(c), Some(d)] = quad {
                 let cx = (a[0] + b[0] + c[0] + d[0]) / 4.0;
                 let cy = (a[1] + b[1] + c[1] + d[1]) / 4.0;
@@ -347,8 +368,9 @@ impl Grid {
         };
         let pts = [pt(-1.0, -1.0), pt(-1.0, 1.0), pt(1.0, -1.0), pt(1.0, 1.0)];
         let (w, h) = (img.width as f64, img.height as f64);
-        let inside =
-            |q: &[f64; 2]| q[0] > r + 1.0 && q[1] > r + 1.0 && q[0] < w - r - 2.0 && q[1] < h - r - 2.0;
+        let inside = |q: &[f64; 2]| {
+            q[0] > r + 1.0 && q[1] > r + 1.0 && q[0] < w - r - 2.0 && q[1] < h - r - 2.0
+        };
         if !pts.iter().all(inside) {
             return None;
         }

@@ -8,8 +8,7 @@ use crate::app::detect::refine::{self, FloatImage};
 use crate::app::detect::{load, Corner, Detection, Detector, Rejection, SIGMA_REF};
 use calib_targets::chessboard::ChessboardParams;
 use calib_targets::detect as ct;
-use std::panic::{AssertUnwindSafe, catch_unwind};
-
+use std::panic::{catch_unwind, AssertUnwindSafe};
 
 /// Largest point-symmetry misfit accepted (clean corners are < 0.01; an
 /// occluder covering a quarter of the window gives ~0.5).

@@ -11,8 +11,11 @@
 /// Grey image as f32, kept at full precision so 16-bit input is not rounded
 /// to 8 bits before refinement.
 pub struct FloatImage {
+    /// Width in pixels.
     pub width: usize,
+    /// Height in pixels.
     pub height: usize,
+    /// Row-major grey levels on a 0..255 scale.
     pub data: Vec<f32>,
 }
 
@@ -54,6 +57,7 @@ impl FloatImage {
 /// Result of refining one corner.
 #[derive(Clone, Copy, Debug)]
 pub struct Refined {
+    /// The refined pixel position.
     pub uv: [f64; 2],
     /// Estimated 1-σ position error (px), largest axis.
     pub sigma: f64,
@@ -154,7 +158,8 @@ impl NormalSystem {
         let [a11, a12, a22] = self.a;
         let ap = [a11 * p[0] + a12 * p[1], a12 * p[0] + a22 * p[1]];
         let resid =
-            (self.c - 2.0 * (p[0] * self.b[0] + p[1] * self.b[1]) + p[0] * ap[0] + p[1] * ap[1]).max(0.0);
+            (self.c - 2.0 * (p[0] * self.b[0] + p[1] * self.b[1]) + p[0] * ap[0] + p[1] * ap[1])
+                .max(0.0);
         // Rows are sqrt(w)-weighted, so the row variance is the weighted
         // residual over the degrees of freedom.
         let var = resid / (self.count - 2.0).max(1.0);

@@ -1,6 +1,6 @@
 //! Synthetic chessboard renderer with exact ground truth.
 //!
-//! Tests (here and, later, in deformcal) need photos whose true corner
+//! Tests and the detection benchmark need photos whose true corner
 //! positions are known to far better than the 0.1 px we assert. This module
 //! ray-casts every sub-sample of every pixel through a pinhole camera with
 //! two-term radial distortion onto a planar or slightly bent board, so the
@@ -19,18 +19,26 @@ use image::{GrayImage, Luma};
 /// x_d = x · (1 + k1 r² + k2 r⁴).
 #[derive(Clone, Copy, Debug)]
 pub struct Camera {
+    /// Focal length along u (px).
     pub fx: f64,
+    /// Focal length along v (px).
     pub fy: f64,
+    /// Principal point u (px).
     pub cx: f64,
+    /// Principal point v (px).
     pub cy: f64,
+    /// Radial coefficient of r².
     pub k1: f64,
+    /// Radial coefficient of r⁴.
     pub k2: f64,
 }
 
 /// Board-to-camera pose: X_cam = R(rvec) · X_board + t, rvec a Rodrigues vector.
 #[derive(Clone, Copy, Debug)]
 pub struct Pose {
+    /// Rotation (Rodrigues vector, radians).
     pub rvec: [f64; 3],
+    /// Translation (board units, metres in the tests).
     pub t: [f64; 3],
 }
 
@@ -38,21 +46,29 @@ pub struct Pose {
 /// positional arguments because callers vary a few fields at a time.
 #[derive(Clone, Debug)]
 pub struct Scene {
+    /// The camera.
     pub camera: Camera,
+    /// Camera-from-board pose.
     pub pose: Pose,
     /// Parabolic bend: board z = bend · (1 − (2x/W − 1)²), W the inner-corner
     /// width, so the centre column bulges by `bend` (board units, +z away
     /// from a camera looking at the board's front) and the edge columns stay flat.
     pub bend: f64,
+    /// Inner corners per column.
     pub rows: usize,
+    /// Inner corners per row.
     pub cols: usize,
+    /// Square size (board units).
     pub spacing: f64,
+    /// Image width in pixels.
     pub width: u32,
+    /// Image height in pixels.
     pub height: u32,
     /// Gaussian blur sigma in pixels (0 = none), applied after sampling.
     pub blur: f64,
     /// Gaussian noise sigma in grey levels (0..255 scale).
     pub noise: f64,
+    /// Seed of the noise.
     pub seed: u64,
     /// Sub-samples per pixel side (anti-aliasing); 4 gives 16 rays per pixel.
     pub supersample: u32,
@@ -69,7 +85,12 @@ pub fn render_board(scene: &Scene) -> (GrayImage, Vec<Option<[f64; 2]>>) {
     let rot = rodrigues(scene.pose.rvec);
     let mut buf = sample_image(scene, &rot);
     if scene.blur > 0.0 {
-        gaussian_blur(&mut buf, scene.width as usize, scene.height as usize, scene.blur);
+        gaussian_blur(
+            &mut buf,
+            scene.width as usize,
+            scene.height as usize,
+            scene.blur,
+        );
     }
     let mut rng = SplitMix(scene.seed);
     let img = GrayImage::from_fn(scene.width, scene.height, |x, y| {
@@ -173,7 +194,11 @@ fn board_albedo(scene: &Scene, bx: f64, by: f64) -> f64 {
         && by >= -2.0 * s
         && bx <= (scene.cols as f64 + 1.0) * s
         && by <= (scene.rows as f64 + 1.0) * s;
-    if in_margin { LIGHT } else { BACKGROUND }
+    if in_margin {
+        LIGHT
+    } else {
+        BACKGROUND
+    }
 }
 
 fn bend_z(scene: &Scene, bx: f64) -> f64 {
@@ -271,7 +296,8 @@ fn gaussian_blur(buf: &mut [f64], w: usize, h: usize, sigma: f64) {
             for i in 0..line_len {
                 let mut acc = 0.0;
                 for (k, wk) in kernel.iter().enumerate() {
-                    let j = (i as isize + k as isize - rad).clamp(0, line_len as isize - 1) as usize;
+                    let j =
+                        (i as isize + k as isize - rad).clamp(0, line_len as isize - 1) as usize;
                     acc += wk * src[l * line_stride + j * stride_in_line];
                 }
                 dst[l * line_stride + i * stride_in_line] = acc / norm;

@@ -210,8 +210,14 @@ mod tests {
             c.lookup("a.png", s(10, 6), || 98),
             Lookup::Miss(Some(98))
         ));
-        assert!(matches!(c.lookup("a.png", s(11, 5), || 99), Lookup::Miss(None)));
-        assert!(matches!(c.lookup("b.png", s(10, 5), || 99), Lookup::Miss(None)));
+        assert!(matches!(
+            c.lookup("a.png", s(11, 5), || 99),
+            Lookup::Miss(None)
+        ));
+        assert!(matches!(
+            c.lookup("b.png", s(10, 5), || 99),
+            Lookup::Miss(None)
+        ));
     }
 
     #[test]

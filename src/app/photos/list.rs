@@ -75,7 +75,7 @@ pub fn list_photos(
                     frame: frame_of[key],
                 })
                 .collect();
-            files.sort_by(|a, b| (a.camera, a.frame).cmp(&(b.camera, b.frame)));
+            files.sort_by_key(|f| (f.camera, f.frame));
             Ok(files)
         }
     }
@@ -206,7 +206,12 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let sub = dir.path().join("photos");
         std::fs::create_dir_all(sub.join("deeper")).unwrap();
-        for f in ["left-2.png", "left-1.png", "right-1.png", "deeper/left-3.png"] {
+        for f in [
+            "left-2.png",
+            "left-1.png",
+            "right-1.png",
+            "deeper/left-3.png",
+        ] {
             std::fs::write(sub.join(f), b"x").unwrap();
         }
         let names = matching(dir.path(), "photos/left-*.png").unwrap();

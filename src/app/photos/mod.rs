@@ -198,8 +198,14 @@ fn detect_one(file: &ImageFile, detector: &Detector, target: Target, cache: &Cac
         let (w, h) = (img.width(), img.height());
         (detector.detect_image(&img, target.rows, target.cols), w, h)
     };
-    let (det, w, h) = std::panic::catch_unwind(std::panic::AssertUnwindSafe(run))
-        .unwrap_or_else(|_| (Err(Rejection::Internal("panic while decoding".into())), 0, 0));
+    let (det, w, h) =
+        std::panic::catch_unwind(std::panic::AssertUnwindSafe(run)).unwrap_or_else(|_| {
+            (
+                Err(Rejection::Internal("panic while decoding".into())),
+                0,
+                0,
+            )
+        });
     Detected {
         result: result(outcome_of(det, w, h), false),
         stamp: Some(cache::Stamp { hash, ..stamp }),
@@ -294,7 +300,12 @@ fn check_usable(
 /// A rejection reason without the file-specific detail after the first colon, so
 /// reasons can be counted.
 fn short_reason(reason: &str) -> String {
-    reason.split(':').next().unwrap_or(reason).trim().to_string()
+    reason
+        .split(':')
+        .next()
+        .unwrap_or(reason)
+        .trim()
+        .to_string()
 }
 
 /// The observations of the usable images; a corner's weight is σ_ref/σ, capped at
