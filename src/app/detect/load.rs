@@ -22,13 +22,12 @@ pub const MAX_FILE_BYTES: u64 = 1 << 30;
 /// Decode `path`, refusing images over `max_pixels`.
 pub fn load(path: &Path, max_pixels: u64) -> Result<DynamicImage, Rejection> {
     let bytes = read_file(path)?;
-    load_bytes(&bytes, path, max_pixels)
+    load_bytes(&bytes, max_pixels)
 }
 
 /// The bytes of an image file, refusing files over [`MAX_FILE_BYTES`].
 pub fn read_file(path: &Path) -> Result<Vec<u8>, Rejection> {
-    let unreadable =
-        |e: &dyn std::fmt::Display| Rejection::Unreadable(format!("{}: {e}", path.display()));
+    let unreadable = |e: &dyn std::fmt::Display| Rejection::Unreadable(e.to_string());
     let size = std::fs::metadata(path).map_err(|e| unreadable(&e))?.len();
     if size > MAX_FILE_BYTES {
         return Err(unreadable(&format!(
@@ -38,11 +37,11 @@ pub fn read_file(path: &Path) -> Result<Vec<u8>, Rejection> {
     std::fs::read(path).map_err(|e| unreadable(&e))
 }
 
-/// Decode an image file's bytes (`path` only names it in messages), refusing
-/// images over `max_pixels`. The format comes from the content, not the name.
-pub fn load_bytes(bytes: &[u8], path: &Path, max_pixels: u64) -> Result<DynamicImage, Rejection> {
-    let unreadable =
-        |e: &dyn std::fmt::Display| Rejection::Unreadable(format!("{}: {e}", path.display()));
+/// Decode an image file's bytes, refusing images over `max_pixels`. The format
+/// comes from the content, not the file name. Messages do not repeat the file
+/// name: the caller knows it.
+pub fn load_bytes(bytes: &[u8], max_pixels: u64) -> Result<DynamicImage, Rejection> {
+    let unreadable = |e: &dyn std::fmt::Display| Rejection::Unreadable(e.to_string());
     let open = || -> Result<ImageReader<_>, Rejection> {
         ImageReader::new(Cursor::new(bytes))
             .with_guessed_format()

@@ -160,7 +160,7 @@ fn detect_one(file: &ImageFile, detector: &Detector, target: Target, cache: &Cac
     let meta = match std::fs::metadata(&file.path) {
         Ok(m) => m,
         Err(e) => {
-            let r = Rejection::Unreadable(format!("{}: {e}", file.path.display()));
+            let r = Rejection::Unreadable(e.to_string());
             return Detected {
                 result: result(outcome_of(Err(r), 0, 0), false),
                 stamp: None,
@@ -190,7 +190,7 @@ fn detect_one(file: &ImageFile, detector: &Detector, target: Target, cache: &Cac
         let img = match bytes
             .as_deref()
             .map_err(Clone::clone)
-            .and_then(|b| load::load_bytes(b, &file.path, detector.max_pixels))
+            .and_then(|b| load::load_bytes(b, detector.max_pixels))
         {
             Ok(img) => img,
             Err(r) => return (Err(r), 0, 0),
