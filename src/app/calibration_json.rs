@@ -45,6 +45,9 @@ pub struct CalibrationJson {
     #[serde(deserialize_with = "nan_if_null")]
     pub rmse_px: f64,
     pub observations: usize,
+    /// Observations removed by outlier rejection (listed in `outliers.csv`).
+    #[serde(default)]
+    pub rejected_observations: usize,
     pub converged: bool,
     pub iterations: i32,
     #[serde(deserialize_with = "nan_if_null")]
@@ -107,6 +110,7 @@ impl From<&Calibration> for CalibrationJson {
             method: c.method.name().into(),
             rmse_px: c.rmse_px,
             observations: d.observations.len(),
+            rejected_observations: c.rejected.len(),
             converged: c.converged,
             iterations: c.iterations(),
             seconds: c.seconds,

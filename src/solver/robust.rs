@@ -251,7 +251,7 @@ fn pick_outliers(dataset: &Dataset, residuals: &[f64], k: f64) -> Vec<usize> {
     for (i, _) in worst {
         let o = &dataset.observations[i];
         let n = per_view.get_mut(&(o.camera, o.frame)).expect("counted");
-        if *n > crate::solver::calibrate::MIN_CORNERS_PER_IMAGE {
+        if *n > MIN_VIEW_CORNERS {
             *n -= 1;
             out.push(i);
         }
@@ -259,6 +259,10 @@ fn pick_outliers(dataset: &Dataset, residuals: &[f64], k: f64) -> Vec<usize> {
     out.sort_unstable();
     out
 }
+
+/// Corners a view keeps at least (a homography needs four; the pipeline's
+/// `MIN_CORNERS_PER_IMAGE`, restated to keep this module below the pipeline).
+const MIN_VIEW_CORNERS: usize = 4;
 
 /// mrcal's outlier rejection: after the robust solve, drop the observations with a
 /// coordinate beyond `settings.outlier_k`·σ (σ estimated robustly), re-solve from
