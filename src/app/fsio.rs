@@ -17,8 +17,8 @@ pub const MAX_DATA_BYTES: u64 = 4 << 30;
 /// Reads a regular file of at most `limit` bytes; anything else (a FIFO, a device,
 /// a directory, a larger file) is refused before reading, so a read always ends.
 pub fn read_limited(path: &Path, limit: u64) -> Result<Vec<u8>> {
-    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-    let meta = file.metadata().map_err(|e| Error::io(path, e))?;
+    // Checked before opening: opening a FIFO blocks until a writer appears.
+    let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
     if !meta.is_file() {
         return Err(Error::Invalid(format!(
             "{}: not a regular file (a directory, FIFO or device cannot be read as input)",
@@ -32,6 +32,7 @@ pub fn read_limited(path: &Path, limit: u64) -> Result<Vec<u8>> {
             meta.len()
         )));
     }
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
     let mut bytes = Vec::with_capacity(meta.len() as usize);
     // The file may grow while it is read: never read more than the limit.
     file.take(limit + 1)

@@ -350,11 +350,13 @@ fn initialise(dataset: &Dataset, warnings: &mut Vec<String>) -> Result<(Dataset,
                     .filter_map(|h| zhang::pose_from_homography(h, &nominal))
                     .collect();
                 check_orientations(&cam.name, poses.iter())?;
-                return Err(if cameras == 1 {
-                    e
-                } else {
-                    Error::Init(format!("camera {}: {e}", cam.name))
-                });
+                // The views are not all parallel: say what else leaves no focal length.
+                return Err(Error::Degenerate(format!(
+                    "no focal length fits the {} views of {}, though they are tilted: the board shows too little perspective \
+                     (too small or too far away) or its corner numbering is inconsistent ({e})",
+                    list.len(),
+                    cam.name
+                )));
             }
         };
         if fallback {
@@ -430,7 +432,7 @@ pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {
         }
     };
     let report = standard.solve(&mut state, &warm)?;
-    robust::check_stage(Method::Standard, &report)?;
+    robust::check_stage(Method::Standard, &report, true)?;
     stages.push(Stage::new(Method::Standard, &report));
 
     let (gauge, frozen, residuals) = if request.method == Method::Standard {
@@ -456,7 +458,7 @@ pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {
             hold: Hold::default(),
         };
         let report = problem.solve(&mut state, &request.settings)?;
-        robust::check_stage(request.method, &report)?;
+        robust::check_stage(request.method, &report, true)?;
         stages.push(Stage::new(request.method, &report));
         (gauge, frozen, report.residuals)
     };

@@ -172,9 +172,12 @@ pub fn drop_inconsistent_views(dataset: &Dataset, warnings: &mut Vec<String>) ->
 /// no progress: the cost underflowed or is flat, it did not converge.
 const POOR_START_PX: f64 = 2.0;
 
-/// Refuses a stage whose cost is not finite, or that "converged" without a single
-/// step from a poor start: both leave the starting point as the answer.
-pub fn check_stage(method: Method, report: &SolveReport) -> Result<()> {
+/// Refuses a stage whose cost is not finite or underflows, or that "converged"
+/// without a single step from a fresh start (Zhang's, or `standard`'s for a
+/// deformation method: neither is ever the optimum) or from a poor one: all leave
+/// the starting point as the answer. Only a re-solve after outlier rejection
+/// (`fresh` false) may legitimately stop at once.
+pub fn check_stage(method: Method, report: &SolveReport, fresh: bool) -> Result<()> {
     if !(report.initial_cost.is_finite() && report.final_cost.is_finite())
         || report.residuals.iter().any(|r| !r.is_finite())
     {
@@ -184,7 +187,14 @@ pub fn check_stage(method: Method, report: &SolveReport) -> Result<()> {
         )));
     }
     let start = rmse(&report.residuals);
-    if report.iterations <= 0 && start > POOR_START_PX {
+    // A zero cost with non-zero residuals is an underflow, not a perfect fit.
+    if report.final_cost <= 0.0 && start > 1e-9 {
+        return Err(Error::Solver(format!(
+            "the {method} solve failed: the cost underflows to zero at an RMSE of {start:.3} px; \
+             check loss_scale_px and the observation weights"
+        )));
+    }
+    if report.iterations <= 0 && (fresh || start > POOR_START_PX) {
         return Err(Error::Solver(format!(
             "the {method} solve made no progress from its start (RMSE {start:.3} px after 0 iterations): \
              the cost is flat or underflows; check loss_scale_px and the observation weights"
@@ -319,7 +329,7 @@ pub fn reject_outliers(
             hold: problem.hold,
         };
         let report = p.solve(state, settings)?;
-        check_stage(problem.method, &report)?;
+        check_stage(problem.method, &report, false)?;
         out.residuals = report.residuals.clone();
         out.frozen = frozen;
         out.reports.push(report);
