@@ -2,8 +2,8 @@
 use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand};
 use deformcal::app::config::Config;
-use deformcal::app::protocol::{self, Shard};
 use deformcal::app::fsio::{self, OutputSet};
+use deformcal::app::protocol::{self, Shard};
 use deformcal::app::{output, report};
 use deformcal::model::synthetic::{Generator, Preset, MAX_IMAGES};
 use deformcal::solver::problem::SolverSettings;
@@ -191,7 +191,10 @@ fn run_generate(args: GenerateArgs) -> Result<()> {
     );
     let cameras = args.cameras.unwrap_or(preset.default_cameras());
     anyhow::ensure!((1..=16).contains(&cameras), "--cameras must be 1 to 16");
-    let set = OutputSet::begin(&args.out, Box::new(|n| n == "observations.csv" || n == "truth.json"))?;
+    let set = OutputSet::begin(
+        &args.out,
+        Box::new(|n| n == "observations.csv" || n == "truth.json"),
+    )?;
     let (dataset, truth) = Generator::new(preset, args.images, args.seed)
         .with_cameras(cameras)
         .generate();
@@ -392,9 +395,8 @@ fn run_merge(args: MergeArgs) -> Result<()> {
     let mut files = Vec::new();
     for p in &args.shards {
         let text = fsio::read_limited(p, fsio::MAX_DATA_BYTES)?;
-        let f: protocol::ShardFile = serde_json::from_slice(&text).map_err(|e| {
-            anyhow::anyhow!("{}: not a deformcal shard file ({e})", p.display())
-        })?;
+        let f: protocol::ShardFile = serde_json::from_slice(&text)
+            .map_err(|e| anyhow::anyhow!("{}: not a deformcal shard file ({e})", p.display()))?;
         files.push(f);
     }
     let (header, rows) = protocol::merge(files)?;

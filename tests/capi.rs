@@ -6,12 +6,21 @@ use std::process::Command;
 
 fn check(printed: &str) {
     for (case, message) in [
-        ("images_1e9", "1000000000 images; at most 20000 can be generated"),
+        (
+            "images_1e9",
+            "1000000000 images; at most 20000 can be generated",
+        ),
         ("stereo", "preset `stereo` is a rig of 2 cameras"),
-        ("target_20000", "a board of 20000 × 20000 corners is too large"),
+        (
+            "target_20000",
+            "a board of 20000 × 20000 corners is too large",
+        ),
         ("result_null", "result is NULL"),
         ("duplicate_names", "cameras 0 and 1 are both named `cam0`"),
-        ("scale_negative", "options.loss_scale_px is -1; use 0.001 to 10000 pixels"),
+        (
+            "scale_negative",
+            "options.loss_scale_px is -1; use 0.001 to 10000 pixels",
+        ),
         ("scale_nan", "options.loss_scale_px is NaN"),
         ("scale_huge", "options.loss_scale_px is 1000000000"),
     ] {

@@ -150,7 +150,11 @@ fn corners_vnl_with_missing_corners_and_empty_images_calibrates() {
         json.observations + json.rejected_observations,
         d.observations.len()
     );
-    assert!(json.rejected_observations < 5, "{}", json.rejected_observations);
+    assert!(
+        json.rejected_observations < 5,
+        "{}",
+        json.rejected_observations
+    );
     for (k, cam) in json.cameras.iter().enumerate() {
         assert!(
             (cam.intrinsics.fx / truth.intrinsics[k].fx - 1.0).abs() < 2e-3,

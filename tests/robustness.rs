@@ -56,7 +56,12 @@ fn displace(d: &mut deformcal::Dataset, percent: usize, lo: f64, hi: f64) -> usi
 
 fn truth_rot(c: &deformcal::Calibration, t: &deformcal::model::synthetic::Truth) -> f64 {
     let cam = &c.dataset.cameras[0];
-    mapping_error_rot(&t.intrinsics[0], &c.state.intrinsics[0], cam.width, cam.height)
+    mapping_error_rot(
+        &t.intrinsics[0],
+        &c.state.intrinsics[0],
+        cam.width,
+        cam.height,
+    )
 }
 
 #[test]
@@ -72,7 +77,11 @@ fn outlier_rejection_keeps_full_near_its_clean_result() {
     let (a, b) = (truth_rot(&with, &t), truth_rot(&without, &t));
     eprintln!("clean {base:.4} px, rejected {a:.4} px, loss only {b:.4} px");
     assert!(a <= 1.5 * base, "with rejection {a} vs clean {base}");
-    assert!(with.rejected.len() >= moved * 8 / 10, "{} of {moved}", with.rejected.len());
+    assert!(
+        with.rejected.len() >= moved * 8 / 10,
+        "{} of {moved}",
+        with.rejected.len()
+    );
     assert!(
         with.rejected.len() <= moved + moved / 5,
         "{} of {moved}",
@@ -97,8 +106,10 @@ fn many_outliers_warn() {
     assert!((0.27..0.33).contains(&moved), "{moved}");
     let c = run(&d, Method::Full, Loss::Cauchy);
     assert!(
-        c.warnings.iter().any(|w| w.contains("were rejected as outliers")
-            && w.contains("the detections are unreliable")),
+        c.warnings
+            .iter()
+            .any(|w| w.contains("were rejected as outliers")
+                && w.contains("the detections are unreliable")),
         "{:?}",
         c.warnings
     );
@@ -113,7 +124,9 @@ fn a_corner_far_outside_the_image_is_dropped_and_named() {
     let c = run(&d, Method::Full, Loss::Cauchy);
     let w = format!("frame {frame} corner {corner} at (7160.0,");
     assert!(
-        c.warnings.iter().any(|x| x.contains("1 observation(s) outside the image dropped") && x.contains(&w)),
+        c.warnings
+            .iter()
+            .any(|x| x.contains("1 observation(s) outside the image dropped") && x.contains(&w)),
         "{:?}",
         c.warnings
     );
@@ -261,7 +274,11 @@ fn camera_patterns_match_in_linear_time() {
 fn a_fifo_is_refused_not_read_forever() {
     let dir = tempfile::tempdir().unwrap();
     let fifo = dir.path().join("obs.csv");
-    if !Command::new("mkfifo").arg(&fifo).status().is_ok_and(|s| s.success()) {
+    if !Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .is_ok_and(|s| s.success())
+    {
         eprintln!("skipped: mkfifo is not available");
         return;
     }
@@ -295,13 +312,23 @@ fn sizes_are_bounded_before_allocating() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("g");
     let e = fails(&deformcal(&[
-        "generate", "--preset", "t2", "--images", "1000000000", "--out", out.to_str().unwrap(),
+        "generate",
+        "--preset",
+        "t2",
+        "--images",
+        "1000000000",
+        "--out",
+        out.to_str().unwrap(),
     ]));
     assert!(e.contains("--images must be 1 to 20000"), "{e}");
     let config = dir.path().join("c.toml");
     std::fs::write(&config, "[data]\nsynthetic = \"t2\"\nimages = 30\n").unwrap();
     let e = fails(&deformcal(&[
-        "protocol", "--config", config.to_str().unwrap(), "--subsets", "1000000000000",
+        "protocol",
+        "--config",
+        config.to_str().unwrap(),
+        "--subsets",
+        "1000000000000",
     ]));
     assert!(e.contains("--subsets must be 1 to 100000"), "{e}");
     assert!(!out.exists());
@@ -316,7 +343,11 @@ fn shard(dir: &Path, edit: impl Fn(&mut serde_json::Value)) -> std::path::PathBu
     )
     .unwrap();
     ok(&deformcal(&[
-        "protocol", "--config", config.to_str().unwrap(), "--shard", "0/1",
+        "protocol",
+        "--config",
+        config.to_str().unwrap(),
+        "--shard",
+        "0/1",
     ]));
     let path = dir.join("o/shard-0-of-1.json");
     let mut v: serde_json::Value =
@@ -330,14 +361,37 @@ fn shard(dir: &Path, edit: impl Fn(&mut serde_json::Value)) -> std::path::PathBu
 fn merge_refuses_impossible_headers_and_wrapping_subsets() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("m");
-    let p = shard(dir.path(), |v| v["header"]["subsets"] = 1_000_000_000_000_000u64.into());
-    let e = fails(&deformcal(&["merge", "--output", out.to_str().unwrap(), p.to_str().unwrap()]));
-    assert!(e.contains("the run claims 1000000000000000 subsets; 1 to 100000 are possible"), "{e}");
+    let p = shard(dir.path(), |v| {
+        v["header"]["subsets"] = 1_000_000_000_000_000u64.into()
+    });
+    let e = fails(&deformcal(&[
+        "merge",
+        "--output",
+        out.to_str().unwrap(),
+        p.to_str().unwrap(),
+    ]));
+    assert!(
+        e.contains("the run claims 1000000000000000 subsets; 1 to 100000 are possible"),
+        "{e}"
+    );
     let p = shard(dir.path(), |v| v["rows"][0]["subset"] = (1u64 << 63).into());
-    let e = fails(&deformcal(&["merge", "--output", out.to_str().unwrap(), p.to_str().unwrap()]));
-    assert!(e.contains("a row has subset 9223372036854775808 outside the run"), "{e}");
+    let e = fails(&deformcal(&[
+        "merge",
+        "--output",
+        out.to_str().unwrap(),
+        p.to_str().unwrap(),
+    ]));
+    assert!(
+        e.contains("a row has subset 9223372036854775808 outside the run"),
+        "{e}"
+    );
     let p = shard(dir.path(), |_| {});
-    ok(&deformcal(&["merge", "--output", out.to_str().unwrap(), p.to_str().unwrap()]));
+    ok(&deformcal(&[
+        "merge",
+        "--output",
+        out.to_str().unwrap(),
+        p.to_str().unwrap(),
+    ]));
     assert!(out.join("summary.json").exists());
 }
 
@@ -347,16 +401,30 @@ const T2: &str = "[data]\nsynthetic = \"t2\"\nimages = 20\nseed = 3\n";
 fn a_second_writer_is_refused_while_the_first_holds_the_lock() {
     let dir = tempfile::tempdir().unwrap();
     let config = dir.path().join("c.toml");
-    std::fs::write(&config, format!("{T2}[calibration]\nmethod = \"standard\"\n")).unwrap();
+    std::fs::write(
+        &config,
+        format!("{T2}[calibration]\nmethod = \"standard\"\n"),
+    )
+    .unwrap();
     let out = dir.path().join("out");
     let held = OutputSet::begin(&out, fsio::calibration_files()).unwrap();
-    let e = fails(&deformcal(&["--config", config.to_str().unwrap(), "--output", out.to_str().unwrap()]));
+    let e = fails(&deformcal(&[
+        "--config",
+        config.to_str().unwrap(),
+        "--output",
+        out.to_str().unwrap(),
+    ]));
     assert!(
         e.contains("another deformcal run is writing this output directory"),
         "{e}"
     );
     drop(held);
-    ok(&deformcal(&["--config", config.to_str().unwrap(), "--output", out.to_str().unwrap()]));
+    ok(&deformcal(&[
+        "--config",
+        config.to_str().unwrap(),
+        "--output",
+        out.to_str().unwrap(),
+    ]));
     assert!(out.join("calibration.json").exists());
 }
 
@@ -365,8 +433,20 @@ fn the_output_set_is_replaced_whole_or_not_at_all() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
     let config = dir.path().join("c.toml");
-    std::fs::write(&config, format!("{T2}data.cameras = 2\n").replace("seed = 3\ndata.cameras = 2", "seed = 3\ncameras = 2")).unwrap();
-    ok(&deformcal(&["--config", config.to_str().unwrap(), "--output", out.to_str().unwrap(), "--method", "standard"]));
+    std::fs::write(
+        &config,
+        format!("{T2}data.cameras = 2\n")
+            .replace("seed = 3\ndata.cameras = 2", "seed = 3\ncameras = 2"),
+    )
+    .unwrap();
+    ok(&deformcal(&[
+        "--config",
+        config.to_str().unwrap(),
+        "--output",
+        out.to_str().unwrap(),
+        "--method",
+        "standard",
+    ]));
     assert!(out.join("cam1.cameramodel").exists());
     std::fs::write(out.join("notes.txt"), "mine").unwrap();
     let before = std::fs::read(out.join("calibration.json")).unwrap();
@@ -374,7 +454,12 @@ fn the_output_set_is_replaced_whole_or_not_at_all() {
     // A failed run (no usable images) leaves the old set as it was.
     let bad = dir.path().join("bad.toml");
     std::fs::write(&bad, "[data]\nsynthetic = \"t2\"\nimages = 2\n").unwrap();
-    fails(&deformcal(&["--config", bad.to_str().unwrap(), "--output", out.to_str().unwrap()]));
+    fails(&deformcal(&[
+        "--config",
+        bad.to_str().unwrap(),
+        "--output",
+        out.to_str().unwrap(),
+    ]));
     assert_eq!(std::fs::read(out.join("calibration.json")).unwrap(), before);
     assert!(out.join("cam1.cameramodel").exists());
 
@@ -386,10 +471,20 @@ fn the_output_set_is_replaced_whole_or_not_at_all() {
 
     // A one-camera run replaces the two-camera set whole and keeps other files.
     std::fs::write(&config, T2).unwrap();
-    ok(&deformcal(&["--config", config.to_str().unwrap(), "--output", out.to_str().unwrap(), "--method", "full"]));
+    ok(&deformcal(&[
+        "--config",
+        config.to_str().unwrap(),
+        "--output",
+        out.to_str().unwrap(),
+        "--method",
+        "full",
+    ]));
     assert!(!out.join("cam1.cameramodel").exists());
     assert!(out.join("cam0.cameramodel").exists());
-    assert_eq!(std::fs::read_to_string(out.join("notes.txt")).unwrap(), "mine");
+    assert_eq!(
+        std::fs::read_to_string(out.join("notes.txt")).unwrap(),
+        "mine"
+    );
     let json = std::fs::read_to_string(out.join("calibration.json")).unwrap();
     assert!(json.contains("\"method\": \"full\""));
     let litter: Vec<_> = std::fs::read_dir(dir.path())
@@ -413,7 +508,12 @@ fn an_unwritable_output_fails_before_the_data_are_read() {
     )
     .unwrap();
     let out = file.join("out");
-    let e = fails(&deformcal(&["--config", config.to_str().unwrap(), "--output", out.to_str().unwrap()]));
+    let e = fails(&deformcal(&[
+        "--config",
+        config.to_str().unwrap(),
+        "--output",
+        out.to_str().unwrap(),
+    ]));
     assert!(e.contains("cannot write"), "{e}");
     assert!(!e.contains("missing.csv"), "{e}");
 }
@@ -422,13 +522,30 @@ fn an_unwritable_output_fails_before_the_data_are_read() {
 fn batch_checks_every_config_before_running_any() {
     let dir = tempfile::tempdir().unwrap();
     let good = dir.path().join("a.toml");
-    std::fs::write(&good, format!("{T2}[protocol]\nsubsets = 1\nimages_per_subset = 5\n")).unwrap();
+    std::fs::write(
+        &good,
+        format!("{T2}[protocol]\nsubsets = 1\nimages_per_subset = 5\n"),
+    )
+    .unwrap();
     let bad = dir.path().join("b.toml");
-    std::fs::write(&bad, "[data]\nsynthetic = \"t2\"\n[protocol]\nsubsets = 0\n").unwrap();
+    std::fs::write(
+        &bad,
+        "[data]\nsynthetic = \"t2\"\n[protocol]\nsubsets = 0\n",
+    )
+    .unwrap();
     let out = dir.path().join("batch");
     let start = std::time::Instant::now();
-    let e = fails(&deformcal(&["batch", "--output", out.to_str().unwrap(), good.to_str().unwrap(), bad.to_str().unwrap()]));
-    assert!(e.contains("b.toml") && e.contains("protocol.subsets must be 1 to 100000"), "{e}");
+    let e = fails(&deformcal(&[
+        "batch",
+        "--output",
+        out.to_str().unwrap(),
+        good.to_str().unwrap(),
+        bad.to_str().unwrap(),
+    ]));
+    assert!(
+        e.contains("b.toml") && e.contains("protocol.subsets must be 1 to 100000"),
+        "{e}"
+    );
     assert!(!out.exists());
     eprintln!("refused in {:.2} s", start.elapsed().as_secs_f64());
 }
@@ -446,7 +563,11 @@ fn a_protocol_in_which_every_calibration_fails_exits_non_zero() {
         "[target]\nrows = 13\ncols = 13\nspacing = 0.07\n[[cameras]]\nname = \"cam0\"\nwidth = 1936\nheight = 1216\n[data]\nobservations = \"obs.csv\"\n[protocol]\nsubsets = 2\nimages_per_subset = 6\nmethods = [\"standard\"]\n",
     )
     .unwrap();
-    let e = fails(&deformcal(&["protocol", "--config", config.to_str().unwrap()]));
+    let e = fails(&deformcal(&[
+        "protocol",
+        "--config",
+        config.to_str().unwrap(),
+    ]));
     assert!(e.contains("every one of the 2 calibrations of"), "{e}");
 }
 
@@ -463,7 +584,13 @@ fn export_reads_back_a_nan_written_as_null() {
     v["rmse_px"] = serde_json::Value::Null;
     std::fs::write(&path, v.to_string()).unwrap();
     let out = dir.path().join("exported");
-    ok(&deformcal(&["export", "--calibration", path.to_str().unwrap(), "--output", out.to_str().unwrap()]));
+    ok(&deformcal(&[
+        "export",
+        "--calibration",
+        path.to_str().unwrap(),
+        "--output",
+        out.to_str().unwrap(),
+    ]));
     assert!(out.join("opencv.yaml").exists());
 }
 
@@ -473,14 +600,24 @@ fn import_quotes_camera_names_so_the_csv_reads_back() {
     let config = dir.path().join("c.toml");
     std::fs::write(&config, format!("{T2}[[cameras]]\nname = \"left,cam\"\nwidth = 1936\nheight = 1216\nmodel = \"radial3\"\n")).unwrap();
     let csv = dir.path().join("obs.csv");
-    ok(&deformcal(&["import", "--config", config.to_str().unwrap(), "--out", csv.to_str().unwrap()]));
+    ok(&deformcal(&[
+        "import",
+        "--config",
+        config.to_str().unwrap(),
+        "--out",
+        csv.to_str().unwrap(),
+    ]));
     let spec = deformcal::model::camera::CameraSpec {
         name: "left,cam".into(),
         width: 1936,
         height: 1216,
         model: "radial3".into(),
     };
-    let t = deformcal::Target { rows: 13, cols: 13, spacing: 0.07 };
+    let t = deformcal::Target {
+        rows: 13,
+        cols: 13,
+        spacing: 0.07,
+    };
     let d = deformcal::app::observations_csv::read(&csv, t, vec![spec]).unwrap();
     assert_eq!(d.num_frames(), 20);
 }
@@ -488,7 +625,10 @@ fn import_quotes_camera_names_so_the_csv_reads_back() {
 #[test]
 fn a_byte_order_mark_is_not_part_of_the_first_field() {
     let (d, _) = data(Preset::T2, 5, 3, 1.0, 1.0);
-    let vnl = format!("\u{feff}{}", deformcal::app::corners_vnl::write_corners_vnl(&d));
+    let vnl = format!(
+        "\u{feff}{}",
+        deformcal::app::corners_vnl::write_corners_vnl(&d)
+    );
     let (read, _) = deformcal::app::corners_vnl::parse_corners_vnl(
         vnl.as_bytes(),
         Path::new("c.vnl"),
@@ -510,5 +650,8 @@ fn a_huge_camera_name_is_quoted_briefly() {
     )
     .unwrap();
     let e = fails(&deformcal(&["--config", config.to_str().unwrap()]));
-    assert!(e.contains("is 900000 bytes long; at most 200 are allowed"), "{e}");
+    assert!(
+        e.contains("is 900000 bytes long; at most 200 are allowed"),
+        "{e}"
+    );
 }

@@ -1,8 +1,8 @@
 //! The C interface of libdeformcal (`include/deformcal.h`): calibrate from in-memory
 //! observations without files. Panics and errors become a non-zero return and a message.
 #![allow(unsafe_code)]
-use crate::model::camera::CameraSpec;
 use crate::app::config::{short, LOSS_SCALE_RANGE, MAX_CAMERAS, MAX_CORNERS};
+use crate::model::camera::CameraSpec;
 use crate::model::synthetic::{Generator, Preset, MAX_IMAGES};
 use crate::solver::problem::Loss;
 use crate::solver::problem::SolverSettings;
@@ -112,7 +112,11 @@ fn settings_from(o: &DcOptions) -> Result<SolverSettings, String> {
     match o.robust {
         -1 => settings.loss = Loss::None,
         0 | 1 => {}
-        r => return Err(format!("options.robust is {r}; use 1 (Cauchy), -1 (none) or 0")),
+        r => {
+            return Err(format!(
+                "options.robust is {r}; use 1 (Cauchy), -1 (none) or 0"
+            ))
+        }
     }
     let (lo, hi) = LOSS_SCALE_RANGE;
     if o.loss_scale_px != 0.0 {
@@ -132,7 +136,11 @@ fn settings_from(o: &DcOptions) -> Result<SolverSettings, String> {
     match o.max_iterations {
         0 => {}
         n if n > 0 => settings.max_iterations = n as u32,
-        n => return Err(format!("options.max_iterations is {n}; use 1 or more, or 0 for 100")),
+        n => {
+            return Err(format!(
+                "options.max_iterations is {n}; use 1 or more, or 0 for 100"
+            ))
+        }
     }
     Ok(settings)
 }
@@ -342,7 +350,9 @@ pub unsafe extern "C" fn deformcal_synthetic(
             ));
         }
         if images as usize > MAX_IMAGES {
-            return Err(format!("{images} images; at most {MAX_IMAGES} can be generated"));
+            return Err(format!(
+                "{images} images; at most {MAX_IMAGES} can be generated"
+            ));
         }
         let images = (images > 0).then_some(images as usize);
         let (d, _) = Generator::new(preset, images, seed)

@@ -1,11 +1,11 @@
 //! The TOML config (SPEC §5): typed, unknown keys rejected, values checked by key.
+use crate::app::protocol::MAX_SUBSETS;
 use crate::error::{Error, Result};
 use crate::model::board::Method;
 use crate::model::camera::CameraSpec;
-use crate::app::protocol::MAX_SUBSETS;
 use crate::model::synthetic::{Preset, MAX_IMAGES};
-use crate::solver::calibrate::MIN_IMAGES;
 use crate::model::target::Target;
+use crate::solver::calibrate::MIN_IMAGES;
 use crate::solver::problem::{Loss, SolverSettings};
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -461,9 +461,9 @@ impl Checker<'_> {
                     ))
                 })?;
                 if let Some(n) = images.filter(|n| !(1..=MAX_IMAGES).contains(n)) {
-                    return Err(
-                        self.err(format!("{table}.images must be 1 to {MAX_IMAGES} (got {n})"))
-                    );
+                    return Err(self.err(format!(
+                        "{table}.images must be 1 to {MAX_IMAGES} (got {n})"
+                    )));
                 }
                 let cameras = cameras.unwrap_or(preset.default_cameras());
                 if !(1..=16).contains(&cameras) {

@@ -44,13 +44,7 @@ pub fn glob_captures(pattern: &str, name: &str) -> Option<String> {
 /// What the wildcard groups of a compiled glob matched in `name`.
 fn captures(re: &regex::Regex, name: &str) -> Option<String> {
     let caps = re.captures(name)?;
-    Some(
-        caps.iter()
-            .skip(1)
-            .flatten()
-            .map(|m| m.as_str())
-            .collect(),
-    )
+    Some(caps.iter().skip(1).flatten().map(|m| m.as_str()).collect())
 }
 
 /// The camera and time-step key of an image file: with patterns, the first camera
@@ -225,9 +219,7 @@ pub fn parse_corners_vnl(
             match number(fields[c], "level")? {
                 // mrgingham: noise doubles with each decimation level.
                 Some(l) if (0.0..=MAX_LEVEL).contains(&l) => weight = 0.5f64.powf(l),
-                Some(l) => {
-                    return Err(err(line, format!("level {l} is outside 0..{MAX_LEVEL}")))
-                }
+                Some(l) => return Err(err(line, format!("level {l} is outside 0..{MAX_LEVEL}"))),
                 None => present = false,
             }
         }

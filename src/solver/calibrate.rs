@@ -4,10 +4,10 @@ use crate::model::board::Method;
 use crate::model::camera::{Intrinsics, Pose};
 use crate::model::dataset::Dataset;
 use crate::model::zhang;
-use crate::solver::robust;
 use crate::solver::problem::{
     choose_gauge, rmse, underobserved_corners, Hold, Problem, SolveReport, SolverSettings, State,
 };
+use crate::solver::robust;
 use nalgebra::{Matrix3, Vector2};
 use std::collections::HashMap;
 use std::time::Instant;

@@ -115,12 +115,14 @@ fn homography_misfit(board: &[Vector2<f64>], image: &[Vector2<f64>]) -> Option<f
     Some(if misfit.is_finite() { misfit } else { f64::MAX })
 }
 
+/// Board points and pixels of one view.
+type Correspondences = (Vec<Vector2<f64>>, Vec<Vector2<f64>>);
+
 /// Drops the views whose corners no planar board numbered as `[target]` explains
 /// (a frame with shuffled corner indices), naming them; when no view fits, says what
 /// is likely wrong instead of failing later with a misleading message.
 pub fn drop_inconsistent_views(dataset: &Dataset, warnings: &mut Vec<String>) -> Result<Dataset> {
-    let mut views: BTreeMap<(usize, usize), (Vec<Vector2<f64>>, Vec<Vector2<f64>>)> =
-        BTreeMap::new();
+    let mut views: BTreeMap<(usize, usize), Correspondences> = BTreeMap::new();
     for o in &dataset.observations {
         let p = dataset.target.nominal(o.corner);
         let e = views.entry((o.frame, o.camera)).or_default();
