@@ -1,5 +1,4 @@
 //! The TOML config (SPEC §5): typed, unknown keys rejected, values checked by key.
-use crate::app::protocol::MAX_SUBSETS;
 use crate::error::{Error, Result};
 use crate::model::board::Method;
 use crate::model::camera::CameraSpec;
@@ -282,6 +281,9 @@ fn message_key(message: &str) -> Option<(String, usize, String)> {
     Some((table.to_string(), index, key))
 }
 
+/// Most subsets a protocol run (or a merged shard header) may have: each subset ×
+/// method is a calibration and a row in memory.
+pub const MAX_SUBSETS: usize = 100_000;
 /// Largest board accepted, in corners (a 1000 × 1000 board).
 pub const MAX_CORNERS: usize = 1_000_000;
 /// Most cameras a config may list.

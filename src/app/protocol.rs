@@ -17,9 +17,7 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-/// Most subsets a protocol run (or a merged shard header) may have: each subset ×
-/// method is a calibration and a row in memory.
-pub const MAX_SUBSETS: usize = 100_000;
+pub use crate::app::config::MAX_SUBSETS;
 
 /// Draws `subsets` subsets of `k` distinct frames out of `n`, each sorted.
 ///
