@@ -655,3 +655,23 @@ fn a_huge_camera_name_is_quoted_briefly() {
         "{e}"
     );
 }
+
+#[test]
+fn an_8_mb_header_is_quoted_briefly() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut text = "h".repeat(8 << 20);
+    text.push_str("\ncam0,0,1,2,3\n");
+    std::fs::write(dir.path().join("obs.csv"), text).unwrap();
+    let config = dir.path().join("c.toml");
+    std::fs::write(
+        &config,
+        "[target]\nrows = 13\ncols = 13\nspacing = 0.07\n[[cameras]]\nname = \"cam0\"\nwidth = 10\nheight = 10\n[data]\nobservations = \"obs.csv\"\n",
+    )
+    .unwrap();
+    let e = fails(&deformcal(&["--config", config.to_str().unwrap()]));
+    assert!(
+        e.contains("obs.csv:1: bad header `hhhh")
+            && e.contains("…`; expected `camera,frame,corner,u,v`"),
+        "{e}"
+    );
+}
