@@ -3,7 +3,13 @@
 use crate::model::board::Paraboloid;
 use crate::model::lens::{Intrinsics, LensModel};
 use crate::solver::calibrate::{Calibration, Stage};
-use serde::{Deserialize, Serialize};
+use serde::{Deserialize, Deserializer, Serialize};
+
+/// serde_json writes a NaN as `null`; read it back as NaN so a file deformcal wrote
+/// can always be exported again.
+fn nan_if_null<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+}
 
 /// One camera in `calibration.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -27,6 +33,7 @@ pub struct FrameJson {
     pub deformation: Option<Paraboloid>,
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub max_out_of_plane_m: Option<f64>,
+    #[serde(deserialize_with = "nan_if_null")]
     pub rmse_px: f64,
     pub observations: usize,
 }
@@ -35,10 +42,15 @@ pub struct FrameJson {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CalibrationJson {
     pub method: String,
+    #[serde(deserialize_with = "nan_if_null")]
     pub rmse_px: f64,
     pub observations: usize,
+    /// Observations removed by outlier rejection (listed in `outliers.csv`).
+    #[serde(default)]
+    pub rejected_observations: usize,
     pub converged: bool,
     pub iterations: i32,
+    #[serde(deserialize_with = "nan_if_null")]
     pub seconds: f64,
     pub cameras: Vec<CameraJson>,
     pub frames: Vec<FrameJson>,
@@ -59,8 +71,11 @@ pub struct StageJson {
     pub method: String,
     pub converged: bool,
     pub iterations: i32,
+    #[serde(deserialize_with = "nan_if_null")]
     pub initial_cost: f64,
+    #[serde(deserialize_with = "nan_if_null")]
     pub final_cost: f64,
+    #[serde(deserialize_with = "nan_if_null")]
     pub seconds: f64,
     pub linear_solver: String,
     pub message: String,
@@ -95,6 +110,7 @@ impl From<&Calibration> for CalibrationJson {
             method: c.method.name().into(),
             rmse_px: c.rmse_px,
             observations: d.observations.len(),
+            rejected_observations: c.rejected.len(),
             converged: c.converged,
             iterations: c.iterations(),
             seconds: c.seconds,

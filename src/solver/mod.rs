@@ -4,3 +4,4 @@
 mod bridge;
 pub mod calibrate;
 pub mod problem;
+pub mod robust;

@@ -46,6 +46,9 @@ pub struct SolverSettings {
     /// Differentiate the whole residual in one autodiff piece (slower; the reference
     /// the default chained Jacobian is tested against).
     pub reference_jacobian: bool,
+    /// Outlier rejection threshold in noise standard deviations (0: off); see
+    /// `calibrate::reject_outliers`.
+    pub outlier_k: f64,
 }
 
 impl Default for SolverSettings {
@@ -61,6 +64,7 @@ impl Default for SolverSettings {
             fix_gauge: true,
             verbose: false,
             reference_jacobian: false,
+            outlier_k: 4.0,
         }
     }
 }

@@ -16,8 +16,14 @@ pub fn data(preset: Preset, images: usize, seed: u64, bend: f64, print: f64) -> 
 
 /// Calibrates with the default settings and the given loss.
 pub fn run(dataset: &Dataset, method: Method, loss: Loss) -> Calibration {
+    run_k(dataset, method, loss, SolverSettings::default().outlier_k)
+}
+
+/// Calibrates with the given loss and outlier rejection threshold (0: off).
+pub fn run_k(dataset: &Dataset, method: Method, loss: Loss, outlier_k: f64) -> Calibration {
     let settings = SolverSettings {
         loss,
+        outlier_k,
         ..SolverSettings::default()
     };
     calibrate(
