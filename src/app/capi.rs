@@ -154,8 +154,7 @@ fn settings_from(o: &DcOptions) -> Result<SolverSettings, String> {
             return Err(format!(
                 "options.loss_scale_px is {}; use {lo} to {hi} pixels, or 0 for 1",
                 o.loss_scale_px
-            )
-            .into());
+            ));
         }
         settings.loss_scale_px = o.loss_scale_px;
     }
@@ -180,7 +179,7 @@ fn settings_from(o: &DcOptions) -> Result<SolverSettings, String> {
 /// `s` is null or a NUL-terminated string.
 unsafe fn string(s: *const c_char, what: &str) -> Result<String, String> {
     if s.is_null() {
-        return Err(format!("{what} is NULL").into());
+        return Err(format!("{what} is NULL"));
     }
     CStr::from_ptr(s)
         .to_str()
@@ -195,7 +194,7 @@ unsafe fn slice<'a, T>(p: *const T, n: usize, what: &str) -> Result<&'a [T], Str
         return Ok(&[]);
     }
     if p.is_null() {
-        return Err(format!("{what} is NULL").into());
+        return Err(format!("{what} is NULL"));
     }
     Ok(std::slice::from_raw_parts(p, n))
 }
