@@ -29,6 +29,10 @@ pub enum Error {
     /// Ceres rejected the problem or could not solve it.
     #[error("solver: {0}")]
     Solver(String),
+    /// The C++ core refused the problem it was given (sizes, values, layout): a
+    /// bug in the caller, or input that should have been refused earlier.
+    #[error("invalid problem: {0}")]
+    Problem(String),
     /// An argument outside its valid range.
     #[error("invalid argument: {0}")]
     Invalid(String),

@@ -264,7 +264,7 @@ impl Problem<'_> {
         let layout = self.layout();
         let mut data = self.data(state, &layout)?;
         let mut report = ffi::solve(&mut data, &settings.options())
-            .map_err(|e| Error::Solver(e.what().to_string()))?;
+            .map_err(|e| Error::Problem(e.what().to_string()))?;
         if !report.usable {
             return Err(Error::Solver(format!(
                 "{} method failed: {}",
@@ -286,7 +286,7 @@ impl Problem<'_> {
     ) -> Result<Evaluation> {
         let data = self.data(state, &self.layout())?;
         let mut e = ffi::evaluate(&data, &settings.options(), with_jacobian)
-            .map_err(|e| Error::Solver(e.what().to_string()))?;
+            .map_err(|e| Error::Problem(e.what().to_string()))?;
         self.unweight(&mut e.residuals);
         Ok(e)
     }
