@@ -247,6 +247,8 @@ fn run_export(args: ExportArgs) -> Result<()> {
                 args.calibration.display()
             )
         })?;
+    json.check_models()
+        .map_err(|m| anyhow::anyhow!("{}: {m}", args.calibration.display()))?;
     let set = OutputSet::begin(&args.output, fsio::calibration_files())?;
     for w in output::write_models(set.path(), &json)?.warnings {
         eprintln!("warning: {w}");

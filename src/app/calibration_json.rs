@@ -23,6 +23,25 @@ pub struct CameraJson {
     pub translation: [f64; 3],
 }
 
+impl CalibrationJson {
+    /// Every camera's intrinsics are of the model the camera names: the keys of
+    /// `intrinsics` pick a model, and a file edited by hand may disagree.
+    pub fn check_models(&self) -> std::result::Result<(), String> {
+        for (k, cam) in self.cameras.iter().enumerate() {
+            if cam.intrinsics.model() != cam.model {
+                return Err(format!(
+                    "cameras[{k}] `{}`: model `{}` needs the intrinsics {}, but they are those of `{}`",
+                    cam.name,
+                    cam.model,
+                    cam.model.param_names().join(", "),
+                    cam.intrinsics.model()
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// One frame in `calibration.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FrameJson {
