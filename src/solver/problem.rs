@@ -242,10 +242,10 @@ impl Problem<'_> {
             corrections_offset: layout.corrections as u32,
             gauge_corners: self.gauge.iter().map(|&c| c as u32).collect(),
             frozen_corners: self.frozen.iter().map(|&c| c as u32).collect(),
-            fix_intrinsics: self.hold.intrinsics,
-            fix_camera_poses: self.hold.camera_poses,
-            fix_corrections: self.hold.corrections,
-            fix_deformations: self.hold.deformations,
+            hold_intrinsics: self.hold.intrinsics,
+            hold_camera_poses: self.hold.camera_poses,
+            hold_corrections: self.hold.corrections,
+            hold_deformations: self.hold.deformations,
         };
         for o in &d.observations {
             data.obs_camera.push(o.camera as u32);
