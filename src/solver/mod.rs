@@ -5,3 +5,4 @@ mod bridge;
 pub mod calibrate;
 pub mod problem;
 pub mod robust;
+mod trust;
