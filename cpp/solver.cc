@@ -149,7 +149,7 @@ void Validate(const ffi::ProblemData& d, const ffi::SolveOptions& o) {
     }
   }
   const size_t gauge = static_cast<size_t>(Board::kGaugeCorners);
-  if (o.fix_gauge && !d.fix_corrections && d.gauge_corners.size() < gauge) {
+  if (o.fix_gauge && !d.hold_corrections && d.gauge_corners.size() < gauge) {
     Fail("the board model needs " + std::to_string(gauge) + " gauge corners");
   }
   for (size_t i = 0; i < d.gauge_corners.size(); ++i) {
@@ -238,18 +238,18 @@ void HoldParameters(const ffi::ProblemData& d, bool pose_only, Params& p, Assemb
       for (int i = 0; i < n; ++i) {
         if (d.intrinsics_held[d.intrinsics_offsets[k] + i]) held.push_back(i);
       }
-      if (d.fix_intrinsics || static_cast<int>(held.size()) == n) {
+      if (d.hold_intrinsics || static_cast<int>(held.size()) == n) {
         problem.SetParameterBlockConstant(intr);
       } else if (!held.empty()) {
         problem.SetManifold(intr, new ceres::SubsetManifold(n, held));
       }
     }
     double* pose = p.camera_poses[k];
-    if (k > 0 && d.fix_camera_poses && problem.HasParameterBlock(pose)) {
+    if (k > 0 && d.hold_camera_poses && problem.HasParameterBlock(pose)) {
       problem.SetParameterBlockConstant(pose);
     }
   }
-  if (Board::kFrameExtra > 0 && d.fix_deformations && !pose_only) {
+  if (Board::kFrameExtra > 0 && d.hold_deformations && !pose_only) {
     // Hold the per-frame parameters, keep the pose free.
     std::vector<int> held;
     for (int e = 0; e < Board::kFrameExtra; ++e) held.push_back(kPoseSize + e);
@@ -265,7 +265,7 @@ template <class Board>
 void HoldCorrections(const ffi::ProblemData& d, const ffi::SolveOptions& o,
                      const std::vector<bool>& corner_used, Params& p, Assembled& a) {
   ceres::Problem& problem = *a.problem;
-  if (d.fix_corrections) {
+  if (d.hold_corrections) {
     for (uint32_t c = 0; c < d.num_corners; ++c) {
       if (problem.HasParameterBlock(p.Correction(c))) problem.SetParameterBlockConstant(p.Correction(c));
     }
@@ -300,9 +300,9 @@ void AddResiduals(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params&
   const size_t n = d.obs_uv.size() / 2;
   constexpr bool kHasCorner = Board::kCornerSize > 0;
   constexpr bool kHasFrameExtra = Board::kFrameExtra > 0;
-  const bool pose_only = d.fix_intrinsics && (d.num_cameras == 1 || d.fix_camera_poses) &&
-                         (!kHasCorner || d.fix_corrections) &&
-                         (!kHasFrameExtra || d.fix_deformations);
+  const bool pose_only = d.hold_intrinsics && (d.num_cameras == 1 || d.hold_camera_poses) &&
+                         (!kHasCorner || d.hold_corrections) &&
+                         (!kHasFrameExtra || d.hold_deformations);
   const std::vector<LensOps<Board>> ops = LensOpsPerCamera<Board>(d);
   std::vector<double*> blocks;
   std::vector<bool> corner_used(d.num_corners, false);

@@ -48,8 +48,8 @@ typedef struct DcObservation {
 typedef struct DcOptions {
   const char* method;   /* "standard", "static", "dynamic" or "full"; NULL = "full" */
   int32_t robust;       /* 1 = Cauchy loss (default), -1 = plain least squares */
-  double loss_scale_px; /* Cauchy scale; 0 = 1 px */
-  int32_t threads;      /* Ceres threads; 0 = 1 */
+  double loss_scale_px; /* Cauchy scale, 1e-3 to 1e4; 0 = 1 px; else refused */
+  int32_t threads;      /* Ceres threads, 1 to 256; 0 = 1 */
   int32_t max_iterations; /* 0 = 100 */
 } DcOptions;
 
@@ -73,7 +73,10 @@ typedef struct DcResult {
   double max_out_of_plane_m;
 } DcResult;
 
-/* Calibrates from in-memory observations.  camera_results must hold num_cameras entries. */
+/* Calibrates from in-memory observations.  camera_results must hold num_cameras entries.
+ * Limits: at most 1 000 000 corners per board and 64 cameras with distinct names;
+ * observations more than 2 % outside their image are dropped; outliers beyond 4 sigma
+ * are rejected.  A solve that makes no progress or whose cost is not finite fails. */
 int deformcal_calibrate(const DcTarget* target, const DcCamera* cameras, size_t num_cameras,
                         const DcObservation* observations, size_t num_observations,
                         const DcOptions* options, DcResult* result, DcCameraResult* camera_results,
@@ -84,8 +87,9 @@ int deformcal_calibrate(const DcTarget* target, const DcCamera* cameras, size_t 
 int deformcal_lens_params(const char* model, const char** names, size_t capacity, size_t* count,
                           char* error, size_t error_len);
 
-/* A built-in synthetic dataset ("t1".."t4", "reference") seen by one camera.  Call with
- * observations = NULL to learn the count, then with room for *count observations. */
+/* A built-in synthetic dataset ("t1".."t4", "reference") seen by one camera (the rig
+ * preset "stereo" is refused); at most 20 000 images.  Call with observations = NULL
+ * to learn the count, then with room for *count observations. */
 int deformcal_synthetic(const char* preset, uint32_t images, uint64_t seed, DcTarget* target,
                         uint32_t* width, uint32_t* height, DcObservation* observations,
                         size_t capacity, size_t* count, char* error, size_t error_len);

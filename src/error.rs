@@ -33,9 +33,25 @@ pub enum Error {
     /// few usable images. Names the pattern.
     #[error("photos `{pattern}`: {message}")]
     Photos { pattern: String, message: String },
+    /// The C++ core refused the problem it was given (sizes, values, layout): a
+    /// bug in the caller, or input that should have been refused earlier.
+    #[error("invalid problem: {0}")]
+    Problem(String),
     /// An argument outside its valid range.
     #[error("invalid argument: {0}")]
     Invalid(String),
+    /// A result that cannot be written (disk full, no permission, name too long).
+    #[error("{path}: cannot write: {cause}")]
+    Write {
+        path: PathBuf,
+        cause: std::io::Error,
+    },
+    /// Another run holds the output directory's advisory lock.
+    #[error("{0}: another deformcal run is writing this output directory; wait for it or choose another output")]
+    Locked(PathBuf),
+    /// A size beyond a documented limit, refused before anything is allocated.
+    #[error("{0}")]
+    TooLarge(String),
 }
 
 /// Library result type.
@@ -45,6 +61,14 @@ impl Error {
     /// An I/O error on `path`.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         Error::Io {
+            path: path.into(),
+            cause: source,
+        }
+    }
+
+    /// A write failure on `path`.
+    pub fn write(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Error::Write {
             path: path.into(),
             cause: source,
         }

@@ -2,9 +2,10 @@
 use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand};
 use deformcal::app::config::Config;
+use deformcal::app::fsio::{self, OutputSet};
 use deformcal::app::protocol::{self, Shard};
 use deformcal::app::{output, report};
-use deformcal::model::synthetic::{Generator, Preset};
+use deformcal::model::synthetic::{Generator, Preset, MAX_IMAGES};
 use deformcal::solver::problem::SolverSettings;
 use deformcal::{calibrate, Method, Request};
 use std::path::PathBuf;
@@ -173,6 +174,9 @@ fn run_calibrate(args: CalibrateArgs) -> Result<()> {
         anyhow::ensure!((1..=256).contains(&t), "--threads must be 1 to 256");
         config.calibration.threads = t;
     }
+    // Lock and stage the output before the work: a busy or unwritable output
+    // directory fails now, not after a long solve.
+    let set = OutputSet::begin(&config.output_dir, fsio::calibration_files())?;
     let (dataset, _truth) = deformcal::app::source::load_data(&config)?;
     let request = Request {
         method: config.calibration.method,
@@ -180,12 +184,16 @@ fn run_calibrate(args: CalibrateArgs) -> Result<()> {
         gauge: config.calibration.gauge_corners.clone(),
     };
     let result = calibrate(&dataset, &request)?;
-    let written = output::write_calibration(&config.output_dir, &result)?;
+    let written = output::write_calibration(set.path(), &result)?;
+    set.commit()?;
     print!("{}", report::summary(&result));
     for w in &written.warnings {
         eprintln!("warning: {w}");
     }
-    println!("  wrote {}", written.calibration.display());
+    println!(
+        "  wrote {}",
+        config.output_dir.join("calibration.json").display()
+    );
     Ok(())
 }
 
@@ -197,7 +205,10 @@ fn run_generate(args: GenerateArgs) -> Result<()> {
             Preset::NAMES.join(", ")
         )
     })?;
-    anyhow::ensure!(args.images != Some(0), "--images must be at least 1");
+    anyhow::ensure!(
+        args.images.is_none_or(|n| (1..=MAX_IMAGES).contains(&n)),
+        "--images must be 1 to {MAX_IMAGES}"
+    );
     let cameras = args.cameras.unwrap_or(preset.default_cameras());
     anyhow::ensure!((1..=16).contains(&cameras), "--cameras must be 1 to 16");
     let model = deformcal::LensModel::parse(&args.model).with_context(|| {
@@ -207,11 +218,16 @@ fn run_generate(args: GenerateArgs) -> Result<()> {
             deformcal::LensModel::names()
         )
     })?;
+    let set = OutputSet::begin(
+        &args.out,
+        Box::new(|n| n == "observations.csv" || n == "truth.json"),
+    )?;
     let (dataset, truth) = Generator::new(preset, args.images, args.seed)
         .with_cameras(cameras)
         .with_models(&vec![model; cameras])
         .generate();
-    deformcal::app::source::write_preset(&args.out, &dataset, &truth)?;
+    deformcal::app::source::write_preset(set.path(), &dataset, &truth)?;
+    set.commit()?;
     println!(
         "wrote {} images, {} observations of preset {} to {}",
         dataset.num_frames(),
@@ -262,18 +278,21 @@ fn run_detect(args: DetectArgs) -> Result<()> {
 }
 
 fn run_export(args: ExportArgs) -> Result<()> {
-    let text = std::fs::read_to_string(&args.calibration)
-        .with_context(|| format!("{}", args.calibration.display()))?;
-    let json: deformcal::app::calibration_json::CalibrationJson = serde_json::from_str(&text)
+    let text = fsio::read_limited(&args.calibration, fsio::MAX_DATA_BYTES)?;
+    let json: deformcal::app::calibration_json::CalibrationJson = serde_json::from_slice(&text)
         .with_context(|| {
             format!(
                 "{}: not a deformcal calibration.json",
                 args.calibration.display()
             )
         })?;
-    for w in output::write_models(&args.output, &json)?.warnings {
+    json.check_models()
+        .map_err(|m| anyhow::anyhow!("{}: {m}", args.calibration.display()))?;
+    let set = OutputSet::begin(&args.output, fsio::calibration_files())?;
+    for w in output::write_models(set.path(), &json)?.warnings {
         eprintln!("warning: {w}");
     }
+    set.commit()?;
     println!(
         "wrote calibration.json, opencv.yaml and {} camera model(s) to {}",
         json.cameras.len(),
@@ -291,7 +310,11 @@ fn protocol_rows(
 ) -> Result<(protocol::Header, Vec<protocol::Row>)> {
     let mut p = config.protocol.clone().unwrap_or_default();
     if let Some(n) = subsets {
-        anyhow::ensure!(n > 0, "--subsets must be at least 1");
+        anyhow::ensure!(
+            (1..=protocol::MAX_SUBSETS).contains(&n),
+            "--subsets must be 1 to {}",
+            protocol::MAX_SUBSETS
+        );
         p.subsets = n;
     }
     let threads = threads.unwrap_or_else(|| {
@@ -375,16 +398,28 @@ fn run_protocol(args: ProtocolArgs) -> Result<()> {
         ),
         None => None,
     };
+    // Shards of one run write side by side into one directory, each its own file;
+    // the unsharded outputs are one set, staged and swapped in under the lock.
+    let set = match shard {
+        Some(_) => {
+            std::fs::create_dir_all(&config.output_dir)
+                .map_err(|e| deformcal::Error::write(&config.output_dir, e))?;
+            None
+        }
+        None => Some(OutputSet::begin(
+            &config.output_dir,
+            fsio::protocol_files(),
+        )?),
+    };
     let (header, rows) = protocol_rows(&config, args.subsets, shard, args.threads)?;
-    match shard {
-        Some(s) => {
+    match set {
+        None => {
+            let s = shard.expect("a shard when there is no output set");
             let file = protocol::ShardFile {
                 header,
                 shard: [s.index, s.count],
                 rows,
             };
-            std::fs::create_dir_all(&config.output_dir)
-                .map_err(|e| deformcal::Error::io(&config.output_dir, e))?;
             let path = config
                 .output_dir
                 .join(format!("shard-{}-of-{}.json", s.index, s.count));
@@ -396,10 +431,12 @@ fn run_protocol(args: ProtocolArgs) -> Result<()> {
                 start.elapsed().as_secs_f64()
             );
         }
-        None => {
+        Some(set) => {
             let summary =
-                deformcal::app::protocol_report::write_outputs(&config.output_dir, &header, &rows)?;
+                deformcal::app::protocol_report::write_outputs(set.path(), &header, &rows)?;
+            set.commit()?;
             print_summary(&summary);
+            all_failed(&header, &rows)?;
             println!(
                 "wrote {} in {:.1} s",
                 config.output_dir.join("report.md").display(),
@@ -411,16 +448,19 @@ fn run_protocol(args: ProtocolArgs) -> Result<()> {
 }
 
 fn run_merge(args: MergeArgs) -> Result<()> {
+    let set = OutputSet::begin(&args.output, fsio::protocol_files())?;
     let mut files = Vec::new();
     for p in &args.shards {
-        let text = std::fs::read_to_string(p).with_context(|| format!("{}", p.display()))?;
-        let f: protocol::ShardFile = serde_json::from_str(&text)
-            .with_context(|| format!("{}: not a deformcal shard file", p.display()))?;
+        let text = fsio::read_limited(p, fsio::MAX_DATA_BYTES)?;
+        let f: protocol::ShardFile = serde_json::from_slice(&text)
+            .map_err(|e| anyhow::anyhow!("{}: not a deformcal shard file ({e})", p.display()))?;
         files.push(f);
     }
     let (header, rows) = protocol::merge(files)?;
-    let summary = deformcal::app::protocol_report::write_outputs(&args.output, &header, &rows)?;
+    let summary = deformcal::app::protocol_report::write_outputs(set.path(), &header, &rows)?;
+    set.commit()?;
     print_summary(&summary);
+    all_failed(&header, &rows)?;
     println!("wrote {}", args.output.join("report.md").display());
     Ok(())
 }
@@ -429,6 +469,8 @@ fn run_batch(args: BatchArgs) -> Result<()> {
     let start = std::time::Instant::now();
     let mut report = String::from("# deformcal evaluation protocol: combined report\n\n");
     let mut names = std::collections::BTreeSet::new();
+    // Every config is checked before the first dataset runs.
+    let mut configs = Vec::new();
     for path in &args.configs {
         let config = Config::load(path)?;
         let name = path
@@ -440,23 +482,64 @@ fn run_batch(args: BatchArgs) -> Result<()> {
             "{}: two configs share the name `{name}`",
             path.display()
         );
-        let (header, rows) = protocol_rows(&config, args.subsets, None, args.threads)?;
-        let dir = args.output.join(&name);
+        configs.push((config, name));
+    }
+    let owned = names.clone();
+    let set = OutputSet::begin(
+        &args.output,
+        Box::new(move |n| n == "report.md" || owned.contains(n)),
+    )?;
+    let mut failed = Vec::new();
+    for (config, name) in &configs {
+        let (header, rows) = protocol_rows(config, args.subsets, None, args.threads)?;
+        let dir = set.path().join(name);
         let summary = deformcal::app::protocol_report::write_outputs(&dir, &header, &rows)?;
         print_summary(&summary);
+        if let Err(e) = all_failed(&header, &rows) {
+            failed.push(format!("{name}: {e}"));
+        }
         report.push_str(&deformcal::app::protocol_report::report_markdown(
             &summary,
             &rows,
             &format!("{name}/"),
         ));
     }
-    deformcal::app::fsio::write_atomic(&args.output.join("report.md"), report.as_bytes())?;
+    deformcal::app::fsio::write_atomic(&set.path().join("report.md"), report.as_bytes())?;
+    set.commit()?;
+    anyhow::ensure!(failed.is_empty(), "{}", failed.join("; "));
     println!(
         "wrote {} in {:.1} s",
         args.output.join("report.md").display(),
         start.elapsed().as_secs_f64()
     );
     Ok(())
+}
+
+/// A protocol run in which every calibration failed is a failure, not a result.
+fn all_failed(header: &protocol::Header, rows: &[protocol::Row]) -> Result<()> {
+    if !rows.is_empty() && rows.iter().all(|r| !r.ok()) {
+        let first = rows[0].error.as_deref().unwrap_or("");
+        anyhow::bail!(
+            "every one of the {} calibrations of {} failed (the first: {first}); the outputs say why",
+            rows.len(),
+            header.dataset
+        );
+    }
+    Ok(())
+}
+
+/// Longest error message printed: a message quotes input (a header, a name), and
+/// a multi-megabyte line helps nobody.
+const MAX_MESSAGE_CHARS: usize = 400;
+
+/// The message cut to [`MAX_MESSAGE_CHARS`] on one line.
+fn brief(message: &str) -> String {
+    let one_line = message.replace(['\n', '\r'], " ");
+    if one_line.chars().count() <= MAX_MESSAGE_CHARS {
+        return one_line;
+    }
+    let cut: String = one_line.chars().take(MAX_MESSAGE_CHARS).collect();
+    format!("{cut}… (message cut)")
 }
 
 fn main() -> ExitCode {
@@ -475,7 +558,7 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", brief(&format!("{e:#}")));
             ExitCode::FAILURE
         }
     }

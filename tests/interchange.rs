@@ -1,12 +1,19 @@
-//! Interchange: exports read back by the real OpenCV and mrcal, corners.vnl in,
-//! and corners found by the real mrgingham on rendered images.
+//! Interchange: exports read back by the real OpenCV and mrcal (for every lens model,
+//! and a rig), mrcal's own projection against ours, corners.vnl in, and corners found
+//! by the real mrgingham on rendered images.
 mod common;
+use common::{exact_settings, python_has, run_tool};
 use deformcal::app::calibration_json::CalibrationJson;
 use deformcal::app::corners_vnl::write_corners_vnl;
+use deformcal::app::output::write_calibration;
 use deformcal::model::synthetic::Generator;
 use deformcal::model::synthetic::Preset;
+use deformcal::{calibrate, LensModel, Method, Request};
 use deformcal::{Intrinsics, Pose};
+use nalgebra::Vector2;
 use nalgebra::Vector3;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use std::io::Write;
 use std::path::Path;
 use std::process::{Command, Stdio};
@@ -146,7 +153,15 @@ fn corners_vnl_with_missing_corners_and_empty_images_calibrates() {
     deformcal(&["--config", config.to_str().unwrap()]);
     let json = read_json(&dir.path().join("out/calibration.json"));
     assert_eq!(json.frames.len(), 20);
-    assert_eq!(json.observations, d.observations.len());
+    assert_eq!(
+        json.observations + json.rejected_observations,
+        d.observations.len()
+    );
+    assert!(
+        json.rejected_observations < 5,
+        "{}",
+        json.rejected_observations
+    );
     for (k, cam) in json.cameras.iter().enumerate() {
         assert!(
             (cam.intrinsics.fx() / truth.intrinsics[k].fx() - 1.0).abs() < 2e-3,
@@ -301,4 +316,232 @@ fn real_mrgingham_corners_calibrate() {
         (got.cx() - k.cx()).abs() < 2.0 && (got.cy() - k.cy()).abs() < 2.0,
         "{got:?}"
     );
+}
+
+/// Camera-frame points for checking a lens model's projection: for pinhole-like models
+/// rays through random pixels of the image (by our unprojection: only our projection is
+/// under test), for fisheye models random directions up to 85° off axis (OpenCV's
+/// fisheye takes atan(r/z), so nothing at or behind 90°), plus the optical axis; each
+/// at a random depth.
+fn probe_points(k: &deformcal::Intrinsics, width: u32, height: u32, seed: u64) -> Vec<[f64; 3]> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut points = vec![[0.0, 0.0, 2.0]];
+    while points.len() < 200 {
+        let ray = if k.model().info().pinhole_like {
+            let px = Vector2::new(
+                rng.gen_range(0.0..width as f64 - 1.0),
+                rng.gen_range(0.0..height as f64 - 1.0),
+            );
+            match k.unproject(&px) {
+                Some(r) => r,
+                None => continue,
+            }
+        } else {
+            let theta = rng.gen_range(0.0..85.0f64).to_radians();
+            let phi = rng.gen_range(0.0..std::f64::consts::TAU);
+            Vector3::new(
+                theta.sin() * phi.cos(),
+                theta.sin() * phi.sin(),
+                theta.cos(),
+            )
+        };
+        let p = ray * rng.gen_range(0.3..8.0);
+        points.push([p.x, p.y, p.z]);
+    }
+    points
+}
+
+/// For every lens model: calibrate a small synthetic set, write the exports, load them
+/// with the real consumers (cv2 by the yaml's distortion_model, mrcal by its
+/// `.cameramodel`) and project with them: the same pixels as ours to 1e-6 px. A model a
+/// format cannot represent must be left out with a warning that names it.
+#[test]
+fn exports_of_every_lens_model_project_like_us() {
+    if !python_has(&["cv2", "mrcal"]) {
+        return;
+    }
+    for (m, model) in LensModel::ALL.into_iter().enumerate() {
+        let mut g = Generator::new(Preset::T2, Some(10), 40 + m as u64).with_models(&[model]);
+        g.bend_scale = 0.0;
+        let (d, _) = g.generate();
+        let c = calibrate(
+            &d,
+            &Request {
+                method: Method::Standard,
+                settings: exact_settings(),
+                gauge: None,
+            },
+        )
+        .unwrap_or_else(|e| panic!("{model}: {e}"));
+        let dir = tempfile::tempdir().unwrap();
+        let written = write_calibration(dir.path(), &c).unwrap();
+        let cam = &d.cameras[0];
+        let k = c.state.intrinsics[0];
+        assert_eq!(k.model(), model);
+        eprintln!("{model}: warnings {:?}", written.warnings);
+
+        // What each format can hold: (OpenCV distortion_model, coefficients), mrcal model.
+        let (opencv, mrcal) = match model {
+            LensModel::Radial3 => (Some(("plumb_bob", 5)), Some("LENSMODEL_OPENCV5")),
+            LensModel::OpenCv5 => (Some(("plumb_bob", 5)), Some("LENSMODEL_OPENCV5")),
+            LensModel::OpenCv8 => (Some(("rational_polynomial", 8)), Some("LENSMODEL_OPENCV8")),
+            LensModel::Kb4 => (Some(("fisheye", 4)), None),
+            LensModel::DoubleSphere => (None, None),
+        };
+        let yaml = dir.path().join("opencv.yaml");
+        let cameramodel = dir.path().join(format!("{}.cameramodel", cam.name));
+        assert_eq!(yaml.exists(), opencv.is_some(), "{model}: opencv.yaml");
+        assert_eq!(
+            cameramodel.exists(),
+            mrcal.is_some(),
+            "{model}: .cameramodel"
+        );
+        // One warning per file left out, naming the file and the model.
+        let mut expected = Vec::new();
+        if opencv.is_none() {
+            expected.push("opencv.yaml".to_string());
+        }
+        if mrcal.is_none() {
+            expected.push(format!("{}.cameramodel", cam.name));
+        }
+        assert_eq!(
+            written.warnings.len(),
+            expected.len(),
+            "{model}: {:?}",
+            written.warnings
+        );
+        for file in &expected {
+            assert!(
+                written
+                    .warnings
+                    .iter()
+                    .any(|w| w.contains(file.as_str()) && w.contains(&format!("`{model}`"))),
+                "{model}: no warning naming {file} and the model: {:?}",
+                written.warnings
+            );
+        }
+        if opencv.is_none() && mrcal.is_none() {
+            continue;
+        }
+
+        let points = probe_points(&k, cam.width, cam.height, 7 + m as u64);
+        let payload = serde_json::json!({ "points": points }).to_string();
+        let tools = run_tool(
+            "check_exports.py",
+            &[dir.path().to_str().unwrap().to_string(), cam.name.clone()],
+            &payload,
+        );
+        let t = &tools[&cam.name];
+        if let Some((name, n)) = opencv {
+            assert_eq!(t["distortion_model"].as_str(), Some(name), "{model}");
+            assert_eq!(t["coefficients"].as_u64(), Some(n), "{model}");
+        }
+        if let Some(name) = mrcal {
+            assert_eq!(t["lensmodel"].as_str(), Some(name), "{model}");
+        }
+        for (tool, present) in [("opencv", opencv.is_some()), ("mrcal", mrcal.is_some())] {
+            if !present {
+                assert!(
+                    t[tool].is_null(),
+                    "{model}: {tool} read a file that is not there"
+                );
+                continue;
+            }
+            let mut worst = 0.0f64;
+            for (i, p) in points.iter().enumerate() {
+                let ours = k.project(&Vector3::from(*p)).unwrap();
+                let (u, v) = (
+                    t[tool][i][0].as_f64().unwrap(),
+                    t[tool][i][1].as_f64().unwrap(),
+                );
+                let diff = (u - ours.x).abs().max((v - ours.y).abs());
+                worst = worst.max(diff);
+                assert!(
+                    diff <= 1e-6,
+                    "{model} {tool} point {i} {p:?}: ({u}, {v}) vs ({}, {})",
+                    ours.x,
+                    ours.y
+                );
+            }
+            eprintln!(
+                "{model} via {tool}: {} points, max projection difference {worst:.2e} px",
+                points.len()
+            );
+        }
+    }
+}
+
+/// mrcal's LENSMODEL_OPENCV8 (and OPENCV5) projection equals ours to 1e-9 px for the
+/// same parameters: random parameters (denominator of the rational term kept well away
+/// from zero) and random points over a wide field.
+#[test]
+fn mrcal_projection_equals_ours_for_the_same_parameters() {
+    if !python_has(&["mrcal"]) {
+        return;
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(12);
+    let mut cases = Vec::new();
+    let mut ours = Vec::new();
+    for case in 0..40 {
+        let model = if case % 4 == 3 {
+            LensModel::OpenCv5
+        } else {
+            LensModel::OpenCv8
+        };
+        let mut params = vec![
+            rng.gen_range(300.0..3000.0),
+            rng.gen_range(300.0..3000.0),
+            rng.gen_range(200.0..1000.0),
+            rng.gen_range(150.0..700.0),
+        ];
+        for name in &model.param_names()[4..] {
+            params.push(match *name {
+                "p1" | "p2" => rng.gen_range(-0.01..0.01),
+                // |k4 r² + k5 r⁴ + k6 r⁶| < 0.5 for r² ≤ 0.72 below.
+                "k4" | "k5" | "k6" => rng.gen_range(-0.3..0.3),
+                _ => rng.gen_range(-0.5..0.5),
+            });
+        }
+        let k = deformcal::Intrinsics::from_params(model, &params).unwrap();
+        let points: Vec<[f64; 3]> = (0..100)
+            .map(|_| {
+                let z = rng.gen_range(0.2..10.0);
+                [
+                    rng.gen_range(-0.6..0.6) * z,
+                    rng.gen_range(-0.6..0.6) * z,
+                    z,
+                ]
+            })
+            .collect();
+        ours.push(
+            points
+                .iter()
+                .map(|p| k.project(&Vector3::from(*p)).unwrap())
+                .collect::<Vec<_>>(),
+        );
+        cases.push(serde_json::json!({
+            "lensmodel": model.info().mrcal.unwrap(),
+            "intrinsics": params,
+            "points": points,
+        }));
+    }
+    let payload = serde_json::json!({ "cases": cases }).to_string();
+    let out = run_tool("mrcal_project.py", &[], &payload);
+    let mut worst = 0.0f64;
+    for (c, case) in ours.iter().enumerate() {
+        for (i, q) in case.iter().enumerate() {
+            let mr = &out["projections"][c][i];
+            let (u, v) = (mr[0].as_f64().unwrap(), mr[1].as_f64().unwrap());
+            let diff = (u - q.x).abs().max((v - q.y).abs());
+            worst = worst.max(diff);
+            assert!(
+                diff <= 1e-9,
+                "case {c} ({}) point {i}: mrcal ({u}, {v}) vs ours ({}, {})",
+                cases[c]["lensmodel"],
+                q.x,
+                q.y
+            );
+        }
+    }
+    eprintln!("mrcal vs deformcal projection: max difference {worst:.2e} px");
 }

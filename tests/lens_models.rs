@@ -281,3 +281,42 @@ dir = "out"
         "{csv}"
     );
 }
+
+#[test]
+fn export_refuses_intrinsics_of_another_model() {
+    let (d, _) = through(Preset::T2, &[LensModel::OpenCv5], 8, 2, 0.0);
+    let c = run(&d, Method::Standard, Loss::Cauchy);
+    let dir = tempfile::tempdir().unwrap();
+    deformcal::app::output::write_calibration(dir.path(), &c).unwrap();
+    let text = std::fs::read_to_string(dir.path().join("calibration.json")).unwrap();
+    let export = |json: &serde_json::Value| {
+        let path = dir.path().join("edited.json");
+        std::fs::write(&path, json.to_string()).unwrap();
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_deformcal"))
+            .args([
+                "export",
+                "--calibration",
+                path.to_str().unwrap(),
+                "--output",
+            ])
+            .arg(dir.path().join("models"))
+            .output()
+            .unwrap();
+        assert!(!out.status.success());
+        String::from_utf8_lossy(&out.stderr).to_string()
+    };
+    let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
+    json["cameras"][0]["model"] = "kb4".into();
+    let stderr = export(&json);
+    assert!(
+        stderr.contains("cameras[0] `cam0`: model `kb4` needs the intrinsics fx, fy, cx, cy, k1, k2, k3, k4, but they are those of `opencv5`"),
+        "{stderr}"
+    );
+    let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
+    json["cameras"][0]["intrinsics"]
+        .as_object_mut()
+        .unwrap()
+        .remove("p1");
+    let stderr = export(&json);
+    assert!(stderr.contains("match no lens model"), "{stderr}");
+}

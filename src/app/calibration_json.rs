@@ -3,7 +3,13 @@
 use crate::model::board::Paraboloid;
 use crate::model::lens::{Intrinsics, LensModel};
 use crate::solver::calibrate::{Calibration, Stage};
-use serde::{Deserialize, Serialize};
+use serde::{Deserialize, Deserializer, Serialize};
+
+/// serde_json writes a NaN as `null`; read it back as NaN so a file deformcal wrote
+/// can always be exported again.
+fn nan_if_null<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+}
 
 /// One camera in `calibration.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -17,6 +23,25 @@ pub struct CameraJson {
     pub translation: [f64; 3],
 }
 
+impl CalibrationJson {
+    /// Every camera's intrinsics are of the model the camera names: the keys of
+    /// `intrinsics` pick a model, and a file edited by hand may disagree.
+    pub fn check_models(&self) -> std::result::Result<(), String> {
+        for (k, cam) in self.cameras.iter().enumerate() {
+            if cam.intrinsics.model() != cam.model {
+                return Err(format!(
+                    "cameras[{k}] `{}`: model `{}` needs the intrinsics {}, but they are those of `{}`",
+                    cam.name,
+                    cam.model,
+                    cam.model.param_names().join(", "),
+                    cam.intrinsics.model()
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// One frame in `calibration.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FrameJson {
@@ -27,6 +52,7 @@ pub struct FrameJson {
     pub deformation: Option<Paraboloid>,
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub max_out_of_plane_m: Option<f64>,
+    #[serde(deserialize_with = "nan_if_null")]
     pub rmse_px: f64,
     pub observations: usize,
 }
@@ -35,10 +61,15 @@ pub struct FrameJson {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CalibrationJson {
     pub method: String,
+    #[serde(deserialize_with = "nan_if_null")]
     pub rmse_px: f64,
     pub observations: usize,
+    /// Observations removed by outlier rejection (listed in `outliers.csv`).
+    #[serde(default)]
+    pub rejected_observations: usize,
     pub converged: bool,
     pub iterations: i32,
+    #[serde(deserialize_with = "nan_if_null")]
     pub seconds: f64,
     pub cameras: Vec<CameraJson>,
     pub frames: Vec<FrameJson>,
@@ -59,8 +90,11 @@ pub struct StageJson {
     pub method: String,
     pub converged: bool,
     pub iterations: i32,
+    #[serde(deserialize_with = "nan_if_null")]
     pub initial_cost: f64,
+    #[serde(deserialize_with = "nan_if_null")]
     pub final_cost: f64,
+    #[serde(deserialize_with = "nan_if_null")]
     pub seconds: f64,
     pub linear_solver: String,
     pub message: String,
@@ -95,6 +129,7 @@ impl From<&Calibration> for CalibrationJson {
             method: c.method.name().into(),
             rmse_px: c.rmse_px,
             observations: d.observations.len(),
+            rejected_observations: c.rejected.len(),
             converged: c.converged,
             iterations: c.iterations(),
             seconds: c.seconds,

@@ -1,9 +1,10 @@
 //! The C interface of libdeformcal (`include/deformcal.h`): calibrate from in-memory
 //! observations without files. Panics and errors become a non-zero return and a message.
 #![allow(unsafe_code)]
+use crate::app::config::{short, LOSS_SCALE_RANGE, MAX_CAMERAS, MAX_CORNERS};
 use crate::model::camera::CameraSpec;
 use crate::model::lens::{LensModel, MAX_PARAMS};
-use crate::model::synthetic::{Generator, Preset};
+use crate::model::synthetic::{Generator, Preset, MAX_IMAGES};
 use crate::solver::problem::Loss;
 use crate::solver::problem::SolverSettings;
 use crate::{calibrate, Dataset, Method, Request, Target};
@@ -134,6 +135,46 @@ fn guarded(error: *mut c_char, len: usize, f: impl FnOnce() -> Result<(), CError
     e.code()
 }
 
+/// Solver settings from `DcOptions`: 0 means the default, anything out of range is
+/// refused (never silently replaced).
+fn settings_from(o: &DcOptions) -> Result<SolverSettings, String> {
+    let mut settings = SolverSettings::default();
+    match o.robust {
+        -1 => settings.loss = Loss::None,
+        0 | 1 => {}
+        r => {
+            return Err(format!(
+                "options.robust is {r}; use 1 (Cauchy), -1 (none) or 0"
+            ))
+        }
+    }
+    let (lo, hi) = LOSS_SCALE_RANGE;
+    if o.loss_scale_px != 0.0 {
+        if !(o.loss_scale_px >= lo && o.loss_scale_px <= hi) {
+            return Err(format!(
+                "options.loss_scale_px is {}; use {lo} to {hi} pixels, or 0 for 1",
+                o.loss_scale_px
+            ));
+        }
+        settings.loss_scale_px = o.loss_scale_px;
+    }
+    match o.threads {
+        0 => {}
+        t @ 1..=256 => settings.threads = t as usize,
+        t => return Err(format!("options.threads is {t}; use 1 to 256, or 0 for 1")),
+    }
+    match o.max_iterations {
+        0 => {}
+        n if n > 0 => settings.max_iterations = n as u32,
+        n => {
+            return Err(format!(
+                "options.max_iterations is {n}; use 1 or more, or 0 for 100"
+            ))
+        }
+    }
+    Ok(settings)
+}
+
 /// # Safety
 /// `s` is null or a NUL-terminated string.
 unsafe fn string(s: *const c_char, what: &str) -> Result<String, String> {
@@ -177,15 +218,37 @@ pub unsafe extern "C" fn deformcal_calibrate(
     error_len: usize,
 ) -> i32 {
     guarded(error, error_len, || {
+        // Outputs are checked before the work, not after a long solve.
+        if result.is_null() {
+            return Err("result is NULL".into());
+        }
+        if camera_results.is_null() {
+            return Err("camera_results is NULL".into());
+        }
         let t = target.as_ref().ok_or("target is NULL")?;
         if t.rows < 2 || t.cols < 2 || !(t.spacing.is_finite() && t.spacing > 0.0) {
             return Err("target: rows and cols must be at least 2 and spacing positive".into());
+        }
+        if (t.rows as usize)
+            .checked_mul(t.cols as usize)
+            .is_none_or(|n| n > MAX_CORNERS)
+        {
+            return Err(format!(
+                "target: a board of {} × {} corners is too large (at most {MAX_CORNERS} corners)",
+                t.rows, t.cols
+            )
+            .into());
         }
         let target = Target {
             rows: t.rows as usize,
             cols: t.cols as usize,
             spacing: t.spacing,
         };
+        if num_cameras > MAX_CAMERAS {
+            return Err(
+                format!("{num_cameras} cameras; at most {MAX_CAMERAS} are supported").into(),
+            );
+        }
         let cams = slice(cameras, num_cameras, "cameras")?;
         if cams.is_empty() {
             return Err("at least one camera is needed".into());
@@ -209,6 +272,15 @@ pub unsafe extern "C" fn deformcal_calibrate(
             .collect::<Result<Vec<_>, CError>>()?;
         if specs.iter().any(|c| c.width == 0 || c.height == 0) {
             return Err("camera width and height must be positive".into());
+        }
+        for (k, c) in specs.iter().enumerate() {
+            if let Some(j) = specs[..k].iter().position(|o| o.name == c.name) {
+                return Err(format!(
+                    "cameras {j} and {k} are both named `{}`; camera names must differ",
+                    short(&c.name)
+                )
+                .into());
+            }
         }
         let obs = slice(observations, num_observations, "observations")?;
         let mut seen = std::collections::HashSet::new();
@@ -241,21 +313,10 @@ pub unsafe extern "C" fn deformcal_calibrate(
             }
             None => Method::Full,
         };
-        let mut settings = SolverSettings::default();
-        if let Some(o) = o {
-            if o.robust < 0 {
-                settings.loss = Loss::None;
-            }
-            if o.loss_scale_px > 0.0 {
-                settings.loss_scale_px = o.loss_scale_px;
-            }
-            if o.threads > 0 {
-                settings.threads = o.threads as usize;
-            }
-            if o.max_iterations > 0 {
-                settings.max_iterations = o.max_iterations as u32;
-            }
-        }
+        let settings = match o {
+            Some(o) => settings_from(o)?,
+            None => SolverSettings::default(),
+        };
         let c = calibrate(
             &dataset,
             &Request {
@@ -273,9 +334,6 @@ pub unsafe extern "C" fn deformcal_calibrate(
             frames: c.dataset.num_frames() as u64,
             max_out_of_plane_m: c.max_out_of_plane(),
         };
-        if camera_results.is_null() {
-            return Err("camera_results is NULL".into());
-        }
         for k in 0..num_cameras {
             let i = c.state.intrinsics[k];
             let p = c.state.camera_poses[k];
@@ -312,7 +370,16 @@ pub unsafe extern "C" fn deformcal_synthetic(
 ) -> i32 {
     guarded(error, error_len, || {
         let name = string(preset, "preset")?;
-        let preset = Preset::parse(&name).ok_or(format!("unknown preset `{name}`"))?;
+        let preset = Preset::parse(&name).ok_or(format!("unknown preset `{}`", short(&name)))?;
+        if preset.default_cameras() != 1 {
+            return Err(format!(
+                "preset `{name}` is a rig of {} cameras; deformcal_synthetic gives one camera's data (use t1..t4 or reference)",
+                preset.default_cameras()
+            ).into());
+        }
+        if images as usize > MAX_IMAGES {
+            return Err(format!("{images} images; at most {MAX_IMAGES} can be generated").into());
+        }
         let images = (images > 0).then_some(images as usize);
         let (d, _) = Generator::new(preset, images, seed)
             .with_cameras(1)

@@ -2,8 +2,9 @@
 use crate::error::{Error, Result};
 use crate::model::board::Method;
 use crate::model::camera::CameraSpec;
-use crate::model::synthetic::Preset;
+use crate::model::synthetic::{Preset, MAX_IMAGES};
 use crate::model::target::Target;
+use crate::solver::calibrate::MIN_IMAGES;
 use crate::solver::problem::{Loss, SolverSettings};
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -26,6 +27,9 @@ pub struct CalibrationConfig {
     pub gauge_corners: Option<Vec<usize>>,
     /// Print Ceres' per-iteration log and full report (timings) to stderr.
     pub verbose: bool,
+    /// Outlier rejection: observations beyond `outlier_k`·σ are dropped and the
+    /// solve repeated until none is; 0 disables it.
+    pub outlier_k: f64,
 }
 
 impl Default for CalibrationConfig {
@@ -43,6 +47,7 @@ impl Default for CalibrationConfig {
             parameter_tolerance: s.parameter_tolerance,
             gauge_corners: None,
             verbose: s.verbose,
+            outlier_k: s.outlier_k,
         }
     }
 }
@@ -60,6 +65,7 @@ impl From<&CalibrationConfig> for SolverSettings {
             fix_gauge: true,
             verbose: c.verbose,
             reference_jacobian: false,
+            outlier_k: c.outlier_k,
         }
     }
 }
@@ -198,7 +204,7 @@ fn line_of(text: &str, offset: usize) -> usize {
 impl Config {
     /// Reads and checks a config file.
     pub fn load(path: &Path) -> Result<Config> {
-        let text = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        let text = crate::app::fsio::read_limited(path, crate::app::fsio::MAX_CONFIG_BYTES)?;
         let text = String::from_utf8(text).map_err(|_| Error::Config {
             path: path.into(),
             message: "not a UTF-8 text file".into(),
@@ -292,7 +298,144 @@ fn message_key(message: &str) -> Option<(String, usize, String)> {
     Some((table.to_string(), index, key))
 }
 
+/// Most subsets a protocol run (or a merged shard header) may have: each subset ×
+/// method is a calibration and a row in memory.
+pub const MAX_SUBSETS: usize = 100_000;
+/// Largest board accepted, in corners (a 1000 × 1000 board).
+pub const MAX_CORNERS: usize = 1_000_000;
+/// Most cameras a config may list.
+pub const MAX_CAMERAS: usize = 64;
+/// Longest camera name, in bytes: `<name>.cameramodel` must fit a file name.
+pub const MAX_NAME_BYTES: usize = 200;
+/// The range of `loss_scale_px`: beyond it the Cauchy cost underflows or the
+/// loss does nothing, and the solver stops at its start.
+pub const LOSS_SCALE_RANGE: (f64, f64) = (1e-3, 1e4);
+/// The range of a non-zero `outlier_k`: below 2 good data is rejected wholesale.
+pub const OUTLIER_K_RANGE: (f64, f64) = (2.0, 100.0);
+
+/// A value cut to a readable length for a message.
+pub fn short(s: &str) -> String {
+    if s.chars().count() > 40 {
+        format!("{}…", s.chars().take(40).collect::<String>())
+    } else {
+        s.to_string()
+    }
+}
+
 impl Checker<'_> {
+    /// Names: present, short enough for a file name, distinct, and distinct as
+    /// file names too (`a/b` and `a_b` would both write `a_b.cameramodel`).
+    fn check_camera_names(&self, cameras: &[CameraSpec]) -> Result<()> {
+        if cameras.len() > MAX_CAMERAS {
+            return Err(self.err(format!(
+                "[[cameras]] lists {} cameras; at most {MAX_CAMERAS} are supported",
+                cameras.len()
+            )));
+        }
+        let mut names: BTreeMap<&str, usize> = BTreeMap::new();
+        let mut files: BTreeMap<String, usize> = BTreeMap::new();
+        for (k, c) in cameras.iter().enumerate() {
+            if c.name.trim().is_empty() {
+                return Err(self.err(format!("cameras[{k}].name must not be empty")));
+            }
+            if c.name.len() > MAX_NAME_BYTES {
+                return Err(self.err(format!(
+                    "cameras[{k}].name `{}` is {} bytes long; at most {MAX_NAME_BYTES} are allowed",
+                    short(&c.name),
+                    c.name.len()
+                )));
+            }
+            if names.insert(&c.name, k).is_some() {
+                return Err(self.err(format!(
+                    "cameras[{k}].name `{}` is used twice",
+                    short(&c.name)
+                )));
+            }
+            let file = crate::app::exports::model_file_name(&c.name);
+            if let Some(other) = files.insert(file.clone(), k) {
+                return Err(self.err(format!(
+                    "cameras[{k}].name `{}` and `{}` would both be written as `{}`; rename one",
+                    short(&c.name),
+                    short(&cameras[other].name),
+                    short(&file)
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// `[calibration]` values in the ranges where the solver is meaningful.
+    fn check_calibration(&self, c: &CalibrationConfig, target: &Target) -> Result<()> {
+        let (lo, hi) = LOSS_SCALE_RANGE;
+        if !(c.loss_scale_px.is_finite() && c.loss_scale_px >= lo && c.loss_scale_px <= hi) {
+            return Err(self.err(format!(
+                "calibration.loss_scale_px must be {lo} to {hi} pixels (got {})",
+                c.loss_scale_px
+            )));
+        }
+        if c.max_iterations == 0 {
+            return Err(self.err("calibration.max_iterations must be at least 1".into()));
+        }
+        let (klo, khi) = OUTLIER_K_RANGE;
+        if !(c.outlier_k == 0.0 || (c.outlier_k >= klo && c.outlier_k <= khi)) {
+            return Err(self.err(format!(
+                "calibration.outlier_k must be 0 (off) or {klo} to {khi} (got {})",
+                c.outlier_k
+            )));
+        }
+        if let Some(g) = &c.gauge_corners {
+            let need = c.method.gauge_corners();
+            if g.len() != need {
+                return Err(self.err(format!(
+                    "calibration.gauge_corners: method `{}` needs exactly {need} corners (got {})",
+                    c.method,
+                    g.len()
+                )));
+            }
+            if let Some(bad) = g.iter().find(|&&i| i >= target.num_corners()) {
+                return Err(self.err(format!(
+                    "calibration.gauge_corners: corner {bad} is not on the {} × {} board",
+                    target.rows, target.cols
+                )));
+            }
+            if let Some((i, dup)) = g.iter().enumerate().find(|(i, c)| g[..*i].contains(c)) {
+                return Err(self.err(format!(
+                    "calibration.gauge_corners: corner {dup} is given twice (entries {} and {i})",
+                    g.iter().position(|x| x == dup).unwrap_or(0)
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// `[protocol]`: sizes bounded before anything is allocated from them.
+    fn check_protocol(&self, p: &ProtocolConfig) -> Result<()> {
+        if !(1..=MAX_SUBSETS).contains(&p.subsets) {
+            return Err(self.err(format!(
+                "protocol.subsets must be 1 to {MAX_SUBSETS} (got {})",
+                p.subsets
+            )));
+        }
+        if p.images_per_subset < MIN_IMAGES {
+            return Err(self.err(format!(
+                "protocol.images_per_subset must be at least {MIN_IMAGES}, the fewest images a calibration accepts (got {})",
+                p.images_per_subset
+            )));
+        }
+        if p.methods.is_empty() {
+            return Err(self.err("protocol.methods must name at least one method".into()));
+        }
+        if let Some((_, m)) = p
+            .methods
+            .iter()
+            .enumerate()
+            .find(|(i, m)| p.methods[..*i].contains(m))
+        {
+            return Err(self.err(format!("protocol.methods lists `{m}` twice")));
+        }
+        Ok(())
+    }
+
     /// A config error; when the message starts with a key, its line is named too.
     fn err(&self, message: String) -> Error {
         let line = message_key(&message).and_then(|(t, i, k)| key_line(self.text, &t, i, &k));
@@ -336,8 +479,10 @@ impl Checker<'_> {
                         Preset::NAMES.join(", ")
                     ))
                 })?;
-                if images == Some(0) {
-                    return Err(self.err(format!("{table}.images must be at least 1")));
+                if let Some(n) = images.filter(|n| !(1..=MAX_IMAGES).contains(n)) {
+                    return Err(self.err(format!(
+                        "{table}.images must be 1 to {MAX_IMAGES} (got {n})"
+                    )));
                 }
                 let cameras = cameras.unwrap_or(preset.default_cameras());
                 if !(1..=16).contains(&cameras) {
@@ -414,7 +559,8 @@ impl Checker<'_> {
                 t.rows, t.cols
             )));
         }
-        if t.rows * t.cols > 1_000_000 {
+        // Checked: a product that wraps around would slip under the cap.
+        if t.rows.checked_mul(t.cols).is_none_or(|n| n > MAX_CORNERS) {
             return Err(self.err(format!(
                 "{table}: a board of {} × {} corners is too large",
                 t.rows, t.cols
@@ -507,13 +653,8 @@ impl Checker<'_> {
             }
         };
         self.check_target("target", &target)?;
+        self.check_camera_names(&cameras)?;
         for (k, c) in cameras.iter().enumerate() {
-            if c.name.trim().is_empty() {
-                return Err(self.err(format!("cameras[{k}].name must not be empty")));
-            }
-            if cameras[..k].iter().any(|o| o.name == c.name) {
-                return Err(self.err(format!("cameras[{k}].name `{}` is used twice", c.name)));
-            }
             if c.width == 0 || c.height == 0 {
                 let key = if c.width == 0 { "width" } else { "height" };
                 return Err(self.err(format!(
@@ -556,12 +697,7 @@ impl Checker<'_> {
         };
 
         let c = &raw.calibration;
-        if !(c.loss_scale_px.is_finite() && c.loss_scale_px > 0.0) {
-            return Err(self.err(format!(
-                "calibration.loss_scale_px must be positive (got {})",
-                c.loss_scale_px
-            )));
-        }
+        self.check_calibration(c, &target)?;
         if c.threads == 0 || c.threads > 256 {
             return Err(self.err(format!(
                 "calibration.threads must be 1 to 256 (got {})",
@@ -579,31 +715,8 @@ impl Checker<'_> {
                 )));
             }
         }
-        if let Some(g) = &c.gauge_corners {
-            let need = c.method.gauge_corners();
-            if g.len() < need {
-                return Err(self.err(format!(
-                    "calibration.gauge_corners: method `{}` needs {need} corners (got {})",
-                    c.method,
-                    g.len()
-                )));
-            }
-            if let Some(bad) = g.iter().find(|&&i| i >= target.num_corners()) {
-                return Err(self.err(format!(
-                    "calibration.gauge_corners: corner {bad} is not on the {} × {} board",
-                    target.rows, target.cols
-                )));
-            }
-        }
         if let Some(p) = &raw.protocol {
-            if p.subsets == 0 || p.images_per_subset == 0 {
-                return Err(self.err(
-                    "protocol.subsets and protocol.images_per_subset must be positive".into(),
-                ));
-            }
-            if p.methods.is_empty() {
-                return Err(self.err("protocol.methods must name at least one method".into()));
-            }
+            self.check_protocol(p)?;
         }
         if let DataSource::CornersVnl { patterns, .. } = &data {
             if let Some(unknown) = patterns

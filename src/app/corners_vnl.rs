@@ -8,38 +8,43 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::fmt::Write;
 use std::path::Path;
 
-/// Matches `name` against a glob with `*` and `?`; returns what the wildcards matched.
-pub fn glob_captures(pattern: &str, name: &str) -> Option<String> {
-    fn go(p: &[char], n: &[char], out: &mut String) -> bool {
-        match p.first() {
-            None => n.is_empty(),
-            Some('*') => {
-                for split in (0..=n.len()).rev() {
-                    let len = out.len();
-                    out.extend(&n[..split]);
-                    if go(&p[1..], &n[split..], out) {
-                        return true;
-                    }
-                    out.truncate(len);
-                }
-                false
-            }
-            Some('?') => {
-                if let Some(&c) = n.first() {
-                    out.push(c);
-                    if go(&p[1..], &n[1..], out) {
-                        return true;
-                    }
-                    out.pop();
-                }
-                false
-            }
-            Some(&c) => n.first() == Some(&c) && go(&p[1..], &n[1..], out),
+/// Longest `camera_patterns` glob accepted.
+const MAX_PATTERN_CHARS: usize = 1000;
+
+/// A `camera_patterns` glob (`*` any run of characters, `?` one character) as an
+/// anchored regular expression with one group per wildcard. The `regex` crate
+/// matches in time linear in the name, whatever the pattern (a backtracking
+/// matcher takes exponential time on `*a*a*a*…z`); globset matches linearly too but
+/// cannot report what the wildcards matched, which is the time step.
+fn glob_regex(pattern: &str) -> Option<regex::Regex> {
+    if pattern.chars().count() > MAX_PATTERN_CHARS {
+        return None;
+    }
+    let mut re = String::from("^(?s:");
+    for c in pattern.chars() {
+        match c {
+            '*' => re.push_str("(.*)"),
+            '?' => re.push_str("(.)"),
+            c => re.push_str(&regex::escape(c.encode_utf8(&mut [0; 4]))),
         }
     }
-    let (p, n): (Vec<char>, Vec<char>) = (pattern.chars().collect(), name.chars().collect());
-    let mut out = String::new();
-    go(&p, &n, &mut out).then_some(out)
+    re.push_str(")$");
+    regex::RegexBuilder::new(&re)
+        .size_limit(1 << 24)
+        .build()
+        .ok()
+}
+
+/// Matches `name` against a glob with `*` and `?`; returns what the wildcards matched.
+pub fn glob_captures(pattern: &str, name: &str) -> Option<String> {
+    let re = glob_regex(pattern)?;
+    captures(&re, name)
+}
+
+/// What the wildcard groups of a compiled glob matched in `name`.
+fn captures(re: &regex::Regex, name: &str) -> Option<String> {
+    let caps = re.captures(name)?;
+    Some(caps.iter().skip(1).flatten().map(|m| m.as_str()).collect())
 }
 
 /// The camera and time-step key of an image file: with patterns, the first camera
@@ -48,22 +53,51 @@ pub fn glob_captures(pattern: &str, name: &str) -> Option<String> {
 fn camera_of(
     file: &str,
     cameras: &[CameraSpec],
-    patterns: &BTreeMap<String, String>,
+    patterns: &[Option<(regex::Regex, bool)>],
 ) -> Option<(usize, String)> {
     if patterns.is_empty() {
         return Some((0, file.to_string()));
     }
     let base = file.rsplit('/').next().unwrap_or(file);
-    cameras.iter().enumerate().find_map(|(k, c)| {
-        let pattern = patterns.get(&c.name)?;
-        let subject = if pattern.contains('/') { file } else { base };
-        glob_captures(pattern, subject).map(|key| (k, key))
+    cameras.iter().enumerate().find_map(|(k, _)| {
+        let (re, whole_path) = patterns[k].as_ref()?;
+        let subject = if *whole_path { file } else { base };
+        captures(re, subject).map(|key| (k, key))
     })
 }
 
-/// Largest decimation level accepted; mrgingham uses a handful, and beyond this a
-/// corner's weight 0.5^level would vanish.
-const MAX_LEVEL: f64 = 30.0;
+/// Each camera's compiled pattern (with whether it matches the whole path), in
+/// camera order; empty without patterns.
+fn compile_patterns(
+    path: &Path,
+    cameras: &[CameraSpec],
+    patterns: &BTreeMap<String, String>,
+) -> Result<Vec<Option<(regex::Regex, bool)>>> {
+    if patterns.is_empty() {
+        return Ok(Vec::new());
+    }
+    cameras
+        .iter()
+        .map(|c| match patterns.get(&c.name) {
+            None => Ok(None),
+            Some(p) => glob_regex(p)
+                .map(|re| Some((re, p.contains('/'))))
+                .ok_or_else(|| {
+                    Error::Invalid(format!(
+                        "{}: data.camera_patterns of `{}` is not a usable pattern (at most {MAX_PATTERN_CHARS} characters)",
+                        path.display(),
+                        crate::app::config::short(&c.name)
+                    ))
+                }),
+        })
+        .collect()
+}
+
+/// Largest decimation level accepted; mrgingham uses a handful, and far beyond
+/// this a corner's weight 0.5^level underflows the solver's cost to nothing.
+pub const MAX_LEVEL: f64 = 10.0;
+/// The range of an explicit `weight` column, for the same reason.
+pub const WEIGHT_RANGE: (f64, f64) = (1e-3, 1e3);
 
 /// One parsed corner row.
 struct Corner {
@@ -82,7 +116,7 @@ pub fn read_corners_vnl(
     cameras: Vec<CameraSpec>,
     patterns: &BTreeMap<String, String>,
 ) -> Result<(Dataset, usize)> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = crate::app::fsio::read_limited(path, crate::app::fsio::MAX_DATA_BYTES)?;
     parse_corners_vnl(&bytes, path, target, cameras, patterns)
 }
 
@@ -106,6 +140,8 @@ pub fn parse_corners_vnl(
         ));
     }
     let text = std::str::from_utf8(bytes).map_err(|_| err(1, "not a UTF-8 text file".into()))?;
+    // Editors on Windows start UTF-8 files with a byte-order mark.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     if cameras.len() > 1 {
         for c in &cameras {
             if !patterns.contains_key(&c.name) {
@@ -164,9 +200,12 @@ pub fn parse_corners_vnl(
             if s == "-" {
                 return Ok(None);
             }
-            let v: f64 = s
-                .parse()
-                .map_err(|_| err(line, format!("{what} `{s}` is not a number")))?;
+            let v: f64 = s.parse().map_err(|_| {
+                err(
+                    line,
+                    format!("{what} `{}` is not a number", crate::app::config::short(s)),
+                )
+            })?;
             if !v.is_finite() {
                 return Err(err(line, format!("{what} is not finite ({v})")));
             }
@@ -185,8 +224,12 @@ pub fn parse_corners_vnl(
             }
         }
         if let Some(c) = weight_col.filter(|&c| c < fields.len()) {
+            let (lo, hi) = WEIGHT_RANGE;
             match number(fields[c], "weight")? {
-                Some(w) if w > 0.0 => weight = w,
+                Some(w) if (lo..=hi).contains(&w) => weight = w,
+                Some(w) if w > 0.0 => {
+                    return Err(err(line, format!("weight {w} is outside {lo}..{hi}")))
+                }
                 _ => present = false,
             }
         }
@@ -214,6 +257,7 @@ pub fn parse_corners_vnl(
         }
     }
     let n = target.num_corners();
+    let compiled = compile_patterns(path, &cameras, patterns)?;
     let mut without_board = 0;
     let mut keyed: Vec<(usize, String, Vec<Corner>)> = Vec::new();
     let mut keys_seen = BTreeSet::new();
@@ -234,7 +278,7 @@ pub fn parse_corners_vnl(
                 ),
             ));
         }
-        let (camera, key) = camera_of(&file, &cameras, patterns).ok_or_else(|| {
+        let (camera, key) = camera_of(&file, &cameras, &compiled).ok_or_else(|| {
             err(
                 first_line,
                 format!("`{file}` matches no pattern of data.camera_patterns"),

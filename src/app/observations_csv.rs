@@ -10,7 +10,7 @@ use std::path::Path;
 
 /// Reads an observations CSV; every problem is reported with its line.
 pub fn read(path: &Path, target: Target, cameras: Vec<CameraSpec>) -> Result<Dataset> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = crate::app::fsio::read_limited(path, crate::app::fsio::MAX_DATA_BYTES)?;
     parse(&bytes, path, target, cameras)
 }
 
@@ -38,6 +38,8 @@ pub fn parse(
             "this is a binary file, not an observations CSV".into(),
         ));
     }
+    // Editors on Windows start UTF-8 files with a byte-order mark.
+    let bytes = bytes.strip_prefix("\u{feff}".as_bytes()).unwrap_or(bytes);
     let mut reader = csv::ReaderBuilder::new()
         .has_headers(true)
         .flexible(true)
@@ -51,7 +53,7 @@ pub fn parse(
             1,
             format!(
                 "bad header `{}`; expected `{}`",
-                header.iter().collect::<Vec<_>>().join(","),
+                short(&header.iter().collect::<Vec<_>>().join(",")),
                 HEADER.join(",")
             ),
         ));
@@ -158,14 +160,25 @@ pub fn write(dataset: &Dataset, path: &Path) -> Result<()> {
     for o in &d.observations {
         sorted.insert((o.camera, d.frame_ids[o.frame], o.corner), o.uv);
     }
-    let mut text = String::with_capacity(40 * sorted.len() + 32);
-    text.push_str(&HEADER.join(","));
-    text.push('\n');
+    // The csv writer quotes a camera name holding a comma or a quote, so the file
+    // reads back as it was written.
+    let mut w = csv::Writer::from_writer(Vec::with_capacity(40 * sorted.len() + 32));
+    let fail = |e: csv::Error| Error::write(path, std::io::Error::other(e.to_string()));
+    w.write_record(HEADER).map_err(fail)?;
     for ((camera, frame, corner), uv) in sorted {
-        let name = &d.cameras[camera].name;
-        text.push_str(&format!("{name},{frame},{corner},{},{}\n", uv[0], uv[1]));
+        w.write_record([
+            d.cameras[camera].name.clone(),
+            frame.to_string(),
+            corner.to_string(),
+            uv[0].to_string(),
+            uv[1].to_string(),
+        ])
+        .map_err(fail)?;
     }
-    write_atomic(path, text.as_bytes())
+    let bytes = w
+        .into_inner()
+        .map_err(|e| Error::write(path, std::io::Error::other(e.to_string())))?;
+    write_atomic(path, &bytes)
 }
 
 /// A field cut to a readable length for an error message.

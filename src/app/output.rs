@@ -1,5 +1,6 @@
 //! The result files of one calibration: `calibration.json`, its exports and
-//! `outliers.csv`, each written atomically into the output directory.
+//! `outliers.csv`, written into a directory (the staging directory of an
+//! [`crate::app::fsio::OutputSet`], which swaps them in as one set).
 use crate::app::calibration_json::CalibrationJson;
 use crate::app::exports;
 use crate::app::fsio::write_atomic;
@@ -15,14 +16,15 @@ pub fn write_calibration(dir: &Path, c: &Calibration) -> Result<Written> {
     Ok(written)
 }
 
-/// `outliers.csv`: the observations the robust loss down-weighted, worst first, so
-/// bad detections can be inspected.
+/// `outliers.csv`: the observations outlier rejection removed (`rejected`), then
+/// those the robust loss down-weighted (`downweighted`), worst first, so bad
+/// detections can be inspected.
 pub fn suspects_csv(c: &Calibration) -> Result<Vec<u8>> {
     let mut w = csv::Writer::from_writer(Vec::new());
     let suspects = c.suspects();
     for s in &suspects {
         w.serialize(s)
-            .map_err(|e| Error::Invalid(format!("outliers.csv: {e}")))?;
+            .map_err(|e| Error::write("outliers.csv", std::io::Error::other(e.to_string())))?;
     }
     // serde writes the header with the first row; an empty report still gets one.
     if suspects.is_empty() {
@@ -34,17 +36,30 @@ pub fn suspects_csv(c: &Calibration) -> Result<Vec<u8>> {
             "v",
             "residual_px",
             "weight",
+            "status",
         ])
-        .map_err(|e| Error::Invalid(format!("outliers.csv: {e}")))?;
+        .map_err(|e| Error::write("outliers.csv", std::io::Error::other(e.to_string())))?;
     }
     w.into_inner()
-        .map_err(|e| Error::Invalid(format!("outliers.csv: {e}")))
+        .map_err(|e| Error::write("outliers.csv", std::io::Error::other(e.to_string())))
 }
 
 /// Writes a calibration's JSON and its OpenCV and mrcal exports into `dir`;
 /// returns the JSON's path and a warning per export left out.
 pub fn write_models(dir: &Path, json: &CalibrationJson) -> Result<Written> {
-    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    let mut files = std::collections::BTreeMap::new();
+    for cam in &json.cameras {
+        let file = exports::model_file_name(&cam.name);
+        if let Some(other) = files.insert(file.clone(), &cam.name) {
+            return Err(Error::Invalid(format!(
+                "cameras `{}` and `{}` would both be written as `{}`; rename one",
+                crate::app::config::short(other),
+                crate::app::config::short(&cam.name),
+                crate::app::config::short(&file)
+            )));
+        }
+    }
+    std::fs::create_dir_all(dir).map_err(|e| Error::write(dir, e))?;
     let text = serde_json::to_string_pretty(json).expect("calibration serialises");
     let mut warnings = Vec::new();
     if let Some(yaml) = exports::opencv_yaml(json, &mut warnings) {

@@ -18,11 +18,24 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+pub use crate::app::config::MAX_SUBSETS;
+
 /// Draws `subsets` subsets of `k` distinct frames out of `n`, each sorted.
 ///
 /// A partial Fisher–Yates shuffle driven by ChaCha8's specified stream, so the
 /// subsets are the same on every machine, thread count and library version.
 pub fn draw_subsets(n: usize, k: usize, subsets: usize, seed: u64) -> Result<Vec<Vec<usize>>> {
+    if k < crate::solver::calibrate::MIN_IMAGES {
+        return Err(Error::Invalid(format!(
+            "images_per_subset is {k}; a calibration needs at least {}",
+            crate::solver::calibrate::MIN_IMAGES
+        )));
+    }
+    if subsets > MAX_SUBSETS {
+        return Err(Error::TooLarge(format!(
+            "{subsets} subsets; at most {MAX_SUBSETS} are possible"
+        )));
+    }
     if k > n {
         return Err(Error::Degenerate(format!(
             "images_per_subset is {k} but the dataset has only {n} images"
@@ -63,7 +76,31 @@ pub struct Header {
 impl Header {
     /// Number of subset × method tasks.
     pub fn tasks(&self) -> usize {
-        self.subsets * self.methods.len()
+        self.subsets.saturating_mul(self.methods.len())
+    }
+
+    /// Refuses a header whose sizes are out of bounds (a hand-edited or corrupt
+    /// shard file) before anything is allocated from them.
+    pub fn check(&self) -> Result<()> {
+        if self.subsets == 0 || self.subsets > MAX_SUBSETS {
+            return Err(Error::TooLarge(format!(
+                "the run claims {} subsets; 1 to {MAX_SUBSETS} are possible",
+                self.subsets
+            )));
+        }
+        if self.methods.is_empty() || self.methods.len() > Method::ALL.len() {
+            return Err(Error::Invalid(format!(
+                "the run claims {} methods; 1 to {} are possible",
+                self.methods.len(),
+                Method::ALL.len()
+            )));
+        }
+        for (i, m) in self.methods.iter().enumerate() {
+            if self.methods[..i].contains(m) {
+                return Err(Error::Invalid(format!("method {m} is listed twice")));
+            }
+        }
+        Ok(())
     }
 }
 
@@ -408,6 +445,7 @@ pub fn merge(files: Vec<ShardFile>) -> Result<(Header, Vec<Row>)> {
         .first()
         .ok_or_else(|| Error::Invalid("no shard files to merge".into()))?;
     let header = first.header.clone();
+    header.check()?;
     let mut slots: Vec<Option<Row>> = vec![None; header.tasks()];
     let m = header.methods.len();
     for f in files {
@@ -424,7 +462,11 @@ pub fn merge(files: Vec<ShardFile>) -> Result<(Header, Vec<Row>)> {
                     row.method
                 )));
             };
-            let t = row.subset * m + mi;
+            let t = row
+                .subset
+                .checked_mul(m)
+                .and_then(|t| t.checked_add(mi))
+                .unwrap_or(usize::MAX);
             if t >= slots.len() {
                 return Err(Error::Invalid(format!(
                     "a row has subset {} outside the run",

@@ -25,6 +25,12 @@ pub fn summary(c: &Calibration) -> String {
         c.seconds,
         c.rmse_px
     );
+    let _ = writeln!(
+        s,
+        "  outliers rejected: {} (beyond {}σ; listed in outliers.csv)",
+        c.rejected.len(),
+        c.settings.outlier_k
+    );
     for (k, cam) in d.cameras.iter().enumerate() {
         let i = c.state.intrinsics[k];
         let values: Vec<String> = i

@@ -29,19 +29,20 @@ impl Method {
 
     /// The registry entry: the board model behind the method.
     pub fn info(self) -> BoardModelInfo {
-        let (name, frame_params, corner_params, gauge_corners) = match self {
-            Method::Standard => ("standard", 0, 0, 0),
+        let (name, frame_params, corner_params, gauge_corners, gauge_dof) = match self {
+            Method::Standard => ("standard", 0, 0, 0, 0),
             // 7 DOF: two corners fully, the z of a third (SPEC §2).
-            Method::Static => ("static", 0, 3, 3),
-            Method::Dynamic => ("dynamic", PARABOLOID_PARAMS, 0, 0),
+            Method::Static => ("static", 0, 3, 3, 7),
+            Method::Dynamic => ("dynamic", PARABOLOID_PARAMS, 0, 0, 0),
             // 4 DOF: (Δx, Δy) of two corners.
-            Method::Full => ("full", PARABOLOID_PARAMS, 2, 2),
+            Method::Full => ("full", PARABOLOID_PARAMS, 2, 2, 4),
         };
         BoardModelInfo {
             name,
             frame_params,
             corner_params,
             gauge_corners,
+            gauge_dof,
         }
     }
 
@@ -91,6 +92,8 @@ pub struct BoardModelInfo {
     pub corner_params: usize,
     /// Corners whose correction is held to fix the gauge.
     pub gauge_corners: usize,
+    /// Correction values those corners hold.
+    pub gauge_dof: usize,
 }
 
 impl fmt::Display for Method {

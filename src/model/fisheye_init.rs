@@ -21,7 +21,10 @@ use nalgebra::{Vector2, Vector3};
 const MIN_RAY_Z: f64 = 0.17;
 /// Candidate focal lengths, as fractions of the image diagonal, on a geometric grid.
 const F_RANGE: (f64, f64) = (0.05, 3.0);
-const F_STEPS: usize = 60;
+const F_STEPS: usize = 40;
+/// Views that take part in the search (evenly picked): enough to find the focal
+/// length, few enough to keep the search cheaper than the solve.
+const SEARCH_VIEWS: usize = 8;
 
 /// One view's correspondences: board points (x, y) and pixels.
 pub type ViewPoints = (Vec<Vector2<f64>>, Vec<Vector2<f64>>);
@@ -81,39 +84,41 @@ pub fn initialise(
     let (cx, cy) = ((width as f64 - 1.0) / 2.0, (height as f64 - 1.0) / 2.0);
     let diagonal = (width as f64).hypot(height as f64);
     let neutral = |f: f64| Intrinsics::pinhole_of(template.model(), f, f, cx, cy);
+    let step = views.len().div_ceil(SEARCH_VIEWS).max(1);
+    let sample: Vec<ViewPoints> = views.iter().step_by(step).cloned().collect();
     let ratio = (F_RANGE.1 / F_RANGE.0).powf(1.0 / (F_STEPS - 1) as f64);
-    let mut best: Option<(f64, f64, Vec<Pose>)> = None;
+    let mut best: Option<(f64, f64)> = None;
     let mut f = F_RANGE.0 * diagonal;
     for _ in 0..F_STEPS {
-        if let Some((e, poses)) = score(&neutral(f), views) {
-            if best.as_ref().is_none_or(|b| e < b.1) {
-                best = Some((f, e, poses));
+        if let Some((e, _)) = score(&neutral(f), &sample) {
+            if best.is_none_or(|b| e < b.1) {
+                best = Some((f, e));
             }
         }
         f *= ratio;
     }
-    let (mut f, e, mut poses) = best?;
+    let (f, _) = best?;
     // Golden-section refinement within one grid step either side.
     let (mut lo, mut hi) = (f / ratio, f * ratio);
     let g = (5f64.sqrt() - 1.0) / 2.0;
-    for _ in 0..30 {
+    for _ in 0..20 {
         let a = hi - g * (hi - lo);
         let b = lo + g * (hi - lo);
-        let ea = score(&neutral(a), views).map_or(f64::INFINITY, |s| s.0);
-        let eb = score(&neutral(b), views).map_or(f64::INFINITY, |s| s.0);
+        let ea = score(&neutral(a), &sample).map_or(f64::INFINITY, |s| s.0);
+        let eb = score(&neutral(b), &sample).map_or(f64::INFINITY, |s| s.0);
         if ea < eb {
             hi = b;
         } else {
             lo = a;
         }
     }
-    let mid = 0.5 * (lo + hi);
-    if let Some((em, pm)) = score(&neutral(mid), views) {
-        if em < e {
-            (f, poses) = (mid, pm);
+    // The refined focal length if every view takes it, else the grid's.
+    for f in [0.5 * (lo + hi), f] {
+        if let Some((_, poses)) = score(&neutral(f), views) {
+            return Some((neutral(f), poses));
         }
     }
-    Some((neutral(f), poses))
+    None
 }
 
 /// The correspondences of camera `camera`'s views in `frames`, in that order.

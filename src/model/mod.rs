@@ -11,4 +11,5 @@ pub mod rig;
 pub mod state;
 pub mod synthetic;
 pub mod target;
+pub mod trust;
 pub mod zhang;

@@ -266,6 +266,10 @@ impl Truth {
     }
 }
 
+/// Most images a generated dataset may have (t2: about 170 MB of observations);
+/// larger requests are refused before anything is allocated.
+pub const MAX_IMAGES: usize = 20_000;
+
 /// Everything a generator call may vary.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Generator {

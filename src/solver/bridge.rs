@@ -47,10 +47,10 @@ pub mod ffi {
         gauge_corners: Vec<u32>,
         /// Corners whose correction is held at its value (too few views to estimate).
         frozen_corners: Vec<u32>,
-        fix_intrinsics: bool,
-        fix_camera_poses: bool,
-        fix_corrections: bool,
-        fix_deformations: bool,
+        hold_intrinsics: bool,
+        hold_camera_poses: bool,
+        hold_corrections: bool,
+        hold_deformations: bool,
     }
 
     /// Solver settings passed to Ceres.

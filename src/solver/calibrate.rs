@@ -8,6 +8,7 @@ use crate::model::{fisheye_init, zhang};
 use crate::solver::problem::{
     choose_gauge, rmse, underobserved_corners, Hold, Problem, SolveReport, SolverSettings, State,
 };
+use crate::solver::robust;
 use nalgebra::{Matrix3, Vector2};
 use std::collections::HashMap;
 use std::time::Instant;
@@ -77,6 +78,8 @@ pub struct Calibration {
     pub seconds: f64,
     /// The solver settings used (for the loss behind [`Calibration::suspects`]).
     pub settings: SolverSettings,
+    /// Observations removed by outlier rejection (not in `dataset`).
+    pub rejected: Vec<Suspect>,
 }
 
 /// An observation the robust loss down-weighted, or (without a loss) one far off.
@@ -88,8 +91,10 @@ pub struct Suspect {
     pub u: f64,
     pub v: f64,
     pub residual_px: f64,
-    /// The weight the loss gave it (1 without a loss).
+    /// The weight the loss gave it (1 without a loss, 0 when rejected).
     pub weight: f64,
+    /// `rejected` (removed by outlier rejection) or `downweighted` (by the loss).
+    pub status: &'static str,
 }
 
 impl Calibration {
@@ -139,11 +144,16 @@ impl Calibration {
                     v: o.uv[1],
                     residual_px: e,
                     weight,
+                    status: "downweighted",
                 })
             })
             .collect();
         out.sort_by(|a, b| b.residual_px.total_cmp(&a.residual_px));
-        out
+        // The rejected first: they are what outlier rejection removed.
+        let mut all = self.rejected.clone();
+        all.sort_by(|a, b| b.residual_px.total_cmp(&a.residual_px));
+        all.extend(out);
+        all
     }
 
     /// Largest per-image out-of-plane deformation.
@@ -359,11 +369,13 @@ fn initialise(dataset: &Dataset, warnings: &mut Vec<String>) -> Result<(Dataset,
                     .filter_map(|h| zhang::pose_from_homography(h, &nominal))
                     .collect();
                 check_orientations(&cam.name, poses.iter())?;
-                return Err(if cameras == 1 {
-                    e
-                } else {
-                    Error::Init(format!("camera {}: {e}", cam.name))
-                });
+                // The views are not all parallel: say what else leaves no focal length.
+                return Err(Error::Degenerate(format!(
+                    "no focal length fits the {} views of {}, though they are tilted: the board shows too little perspective \
+                     (too small or too far away) or its corner numbering is inconsistent ({e})",
+                    list.len(),
+                    cam.name
+                )));
             }
         };
         if fallback {
@@ -415,7 +427,9 @@ fn initialise(dataset: &Dataset, warnings: &mut Vec<String>) -> Result<(Dataset,
 pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {
     let start = Instant::now();
     let mut warnings = Vec::new();
-    let (dataset, mut state, init_fallback) = initialise(dataset, &mut warnings)?;
+    let dataset = robust::drop_outside_image(dataset, &mut warnings)?;
+    let dataset = robust::drop_inconsistent_views(&dataset, &mut warnings)?;
+    let (dataset, mut state, init_fallback) = initialise(&dataset, &mut warnings)?;
     coverage_warnings(&dataset, &mut warnings);
     let initial_intrinsics = state.intrinsics.clone();
 
@@ -444,6 +458,7 @@ pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {
         }
     };
     let report = standard.solve(&mut state, &warm)?;
+    robust::check_stage(Method::Standard, &report, true)?;
     stages.push(Stage::new(Method::Standard, &report));
 
     let (gauge, frozen, residuals) = if request.method == Method::Standard {
@@ -469,9 +484,20 @@ pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {
             hold: Hold::default(),
         };
         let report = problem.solve(&mut state, &request.settings)?;
+        robust::check_stage(request.method, &report, true)?;
         stages.push(Stage::new(request.method, &report));
         (gauge, frozen, report.residuals)
     };
+    let (dataset, residuals, frozen, rejected) = finish_robustly(
+        dataset,
+        &mut state,
+        request,
+        gauge.clone(),
+        frozen,
+        residuals,
+        &mut stages,
+        &mut warnings,
+    )?;
     let converged = stages.last().map(|s| s.converged).unwrap_or(false);
     if !converged {
         warnings.push(format!(
@@ -495,5 +521,63 @@ pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {
         warnings,
         seconds: start.elapsed().as_secs_f64(),
         settings: request.settings.clone(),
+        rejected,
     })
+}
+
+/// What [`finish_robustly`] hands back: the data kept, their residuals, the frozen
+/// corners and the rejected observations.
+type Finished = (Dataset, Vec<f64>, Vec<usize>, Vec<Suspect>);
+
+/// After the method's solve: outlier rejection with re-solves (see
+/// [`robust::reject_outliers`]) and the warnings about what the data cannot show.
+#[allow(clippy::too_many_arguments)] // the pipeline's state, passed through once
+fn finish_robustly(
+    dataset: Dataset,
+    state: &mut State,
+    request: &Request,
+    gauge: Vec<usize>,
+    frozen: Vec<usize>,
+    residuals: Vec<f64>,
+    stages: &mut Vec<Stage>,
+    warnings: &mut Vec<String>,
+) -> Result<Finished> {
+    let total = dataset.observations.len();
+    let problem = Problem {
+        dataset: &dataset,
+        method: request.method,
+        gauge,
+        frozen,
+        hold: Hold::default(),
+    };
+    let r = robust::reject_outliers(problem, state, &request.settings, residuals)?;
+    for report in &r.reports {
+        stages.push(Stage::new(request.method, report));
+    }
+    let fraction = r.rejected.len() as f64 / total.max(1) as f64;
+    if fraction > robust::WARN_REJECTED_FRACTION {
+        warnings.push(format!(
+            "{} of {total} observations ({:.0}%) were rejected as outliers (beyond {}σ): \
+             the detections are unreliable; check the corner detector and the data",
+            r.rejected.len(),
+            100.0 * fraction,
+            request.settings.outlier_k
+        ));
+    }
+    robust::weak_intrinsics_warnings(&r.dataset, state, warnings);
+    let rejected = r
+        .rejected
+        .iter()
+        .map(|x| Suspect {
+            camera: r.dataset.cameras[x.observation.camera].name.clone(),
+            frame: r.dataset.frame_ids[x.observation.frame],
+            corner: x.observation.corner,
+            u: x.observation.uv[0],
+            v: x.observation.uv[1],
+            residual_px: x.residual_px,
+            weight: 0.0,
+            status: "rejected",
+        })
+        .collect();
+    Ok((r.dataset, r.residuals, r.frozen, rejected))
 }

@@ -4,3 +4,5 @@
 mod bridge;
 pub mod calibrate;
 pub mod problem;
+pub mod robust;
+mod trust;

@@ -46,6 +46,9 @@ pub struct SolverSettings {
     /// Differentiate the whole residual in one autodiff piece (slower; the reference
     /// the default chained Jacobian is tested against).
     pub reference_jacobian: bool,
+    /// Outlier rejection threshold in noise standard deviations (0: off); see
+    /// `calibrate::reject_outliers`.
+    pub outlier_k: f64,
 }
 
 impl Default for SolverSettings {
@@ -61,6 +64,7 @@ impl Default for SolverSettings {
             fix_gauge: true,
             verbose: false,
             reference_jacobian: false,
+            outlier_k: 4.0,
         }
     }
 }
@@ -238,10 +242,10 @@ impl Problem<'_> {
             corrections_offset: layout.corrections as u32,
             gauge_corners: self.gauge.iter().map(|&c| c as u32).collect(),
             frozen_corners: self.frozen.iter().map(|&c| c as u32).collect(),
-            fix_intrinsics: self.hold.intrinsics,
-            fix_camera_poses: self.hold.camera_poses,
-            fix_corrections: self.hold.corrections,
-            fix_deformations: self.hold.deformations,
+            hold_intrinsics: self.hold.intrinsics,
+            hold_camera_poses: self.hold.camera_poses,
+            hold_corrections: self.hold.corrections,
+            hold_deformations: self.hold.deformations,
         };
         for o in &d.observations {
             data.obs_camera.push(o.camera as u32);
@@ -260,7 +264,7 @@ impl Problem<'_> {
         let layout = self.layout();
         let mut data = self.data(state, &layout)?;
         let mut report = ffi::solve(&mut data, &settings.options())
-            .map_err(|e| Error::Solver(e.what().to_string()))?;
+            .map_err(|e| Error::Problem(e.what().to_string()))?;
         if !report.usable {
             return Err(Error::Solver(format!(
                 "{} method failed: {}",
@@ -282,7 +286,7 @@ impl Problem<'_> {
     ) -> Result<Evaluation> {
         let data = self.data(state, &self.layout())?;
         let mut e = ffi::evaluate(&data, &settings.options(), with_jacobian)
-            .map_err(|e| Error::Solver(e.what().to_string()))?;
+            .map_err(|e| Error::Problem(e.what().to_string()))?;
         self.unweight(&mut e.residuals);
         Ok(e)
     }

@@ -16,8 +16,14 @@ pub fn data(preset: Preset, images: usize, seed: u64, bend: f64, print: f64) -> 
 
 /// Calibrates with the default settings and the given loss.
 pub fn run(dataset: &Dataset, method: Method, loss: Loss) -> Calibration {
+    run_k(dataset, method, loss, SolverSettings::default().outlier_k)
+}
+
+/// Calibrates with the given loss and outlier rejection threshold (0: off).
+pub fn run_k(dataset: &Dataset, method: Method, loss: Loss, outlier_k: f64) -> Calibration {
     let settings = SolverSettings {
         loss,
+        outlier_k,
         ..SolverSettings::default()
     };
     calibrate(
@@ -103,4 +109,71 @@ pub fn bend_errors(c: &Calibration, truth: &Truth) -> Vec<f64> {
             (sq / target.num_corners() as f64).sqrt()
         })
         .collect()
+}
+
+/// Debian's interpreter, where python3-opencv and python3-mrcal install cv2 and mrcal.
+pub const PYTHON: &str = "/usr/bin/python3";
+
+/// Whether `/usr/bin/python3` can import every module; prints why a test skips if not.
+/// (CI installs both, so there the peer tests always run.)
+pub fn python_has(modules: &[&str]) -> bool {
+    let code = modules
+        .iter()
+        .map(|m| format!("import {m}"))
+        .collect::<Vec<_>>()
+        .join("; ");
+    let ok = std::process::Command::new(PYTHON)
+        .args(["-c", &code])
+        .output()
+        .map(|o| o.status.success())
+        .unwrap_or(false);
+    if !ok {
+        eprintln!(
+            "SKIPPED: {PYTHON} cannot `{code}` (apt-get install python3-opencv python3-mrcal)"
+        );
+    }
+    ok
+}
+
+/// Runs `tests/tools/<script>` with `args`, `stdin` piped in, and parses its JSON output;
+/// panics with the script's stderr if it fails.
+pub fn run_tool(script: &str, args: &[String], stdin: &str) -> serde_json::Value {
+    use std::io::Write;
+    use std::process::{Command, Stdio};
+    let path = format!("{}/tests/tools/{script}", env!("CARGO_MANIFEST_DIR"));
+    let mut child = Command::new(PYTHON)
+        .arg(&path)
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap_or_else(|e| panic!("run {PYTHON} {path}: {e}"));
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(stdin.as_bytes())
+        .unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{script} {args:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout)
+        .unwrap_or_else(|e| panic!("{script}: {e}: {}", String::from_utf8_lossy(&out.stdout)))
+}
+
+/// Settings that run the solver to convergence without a robust loss, for comparisons
+/// with other tools' plain least squares.
+pub fn exact_settings() -> SolverSettings {
+    SolverSettings {
+        loss: Loss::None,
+        function_tolerance: 1e-15,
+        parameter_tolerance: 1e-15,
+        gradient_tolerance: 1e-15,
+        max_iterations: 500,
+        ..SolverSettings::default()
+    }
 }

@@ -1,0 +1,143 @@
+//! How much of a calibration's residual the detector noise explains (Hagemann et
+//! al., IJCV 2022; Kanatani 1998): the noise estimate σ̂, the bias ratio and the
+//! geometric AIC. Pure arithmetic on residuals; what a residual is and how many
+//! parameters were free is the caller's.
+use crate::model::dataset::Dataset;
+use std::collections::HashMap;
+
+/// The noise, bias and G-AIC figures of one calibration.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Trust {
+    /// σ̂: detector noise per image coordinate, pixels.
+    pub noise_px: f64,
+    /// Where σ̂ comes from: `"config"` or `"neighbours"`.
+    pub noise_source: &'static str,
+    /// N: residuals (two per observation).
+    pub residuals: usize,
+    /// p: free parameters after the gauge.
+    pub parameters: usize,
+    /// max(0, rmse² − 2σ̂²(1 − p/N)) / rmse²: the share of the residual that noise
+    /// does not explain.
+    pub bias_ratio: f64,
+    /// Σ‖u − p‖² + 2·p·σ̂², pixels²: lower is better, on the same observations.
+    pub g_aic: f64,
+}
+
+/// Estimates the detector noise from the residuals of neighbouring corners.
+///
+/// A model error bends the residual field smoothly across the board, so it nearly
+/// cancels in the difference of two adjacent corners' residuals, while the noise
+/// of the two adds: E‖r_i − r_j‖² ≈ 4σ² for the 2D residuals of neighbours i, j.
+/// So σ̂ comes from the data without assuming the model is right, which is what a
+/// bias test needs. `None` with no pair of neighbours.
+pub fn noise_from_neighbours(dataset: &Dataset, residuals: &[f64]) -> Option<f64> {
+    let cols = dataset.target.cols;
+    let mut at: HashMap<(usize, usize, usize), [f64; 2]> = HashMap::new();
+    for (o, r) in dataset.observations.iter().zip(residuals.chunks_exact(2)) {
+        at.insert((o.camera, o.frame, o.corner), [r[0], r[1]]);
+    }
+    let (mut sum, mut pairs) = (0.0, 0usize);
+    for (&(camera, frame, corner), r) in &at {
+        let right = (corner % cols + 1 < cols).then_some(corner + 1);
+        let below = Some(corner + cols);
+        for n in [right, below].into_iter().flatten() {
+            if let Some(q) = at.get(&(camera, frame, n)) {
+                sum += (r[0] - q[0]).powi(2) + (r[1] - q[1]).powi(2);
+                pairs += 1;
+            }
+        }
+    }
+    (pairs > 0).then(|| (sum / (4.0 * pairs as f64)).sqrt())
+}
+
+/// The figures for residuals (u, v per observation) of a fit with `parameters`
+/// free parameters and noise σ̂.
+pub fn assess(residuals: &[f64], parameters: usize, noise_px: f64, source: &'static str) -> Trust {
+    let n = residuals.len();
+    let sum_sq: f64 = residuals.iter().map(|r| r * r).sum();
+    // rmse per point (SPEC §3): Σ‖u − p‖² over N/2 points.
+    let rmse2 = sum_sq / (n as f64 / 2.0);
+    let expected = 2.0 * noise_px * noise_px * (1.0 - parameters as f64 / n as f64);
+    let bias_ratio = if rmse2 > 0.0 {
+        ((rmse2 - expected) / rmse2).max(0.0)
+    } else {
+        0.0
+    };
+    Trust {
+        noise_px,
+        noise_source: source,
+        residuals: n,
+        parameters,
+        bias_ratio,
+        g_aic: sum_sq + 2.0 * parameters as f64 * noise_px * noise_px,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::camera::CameraSpec;
+    use crate::model::target::Target;
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+
+    fn board(rows: usize, cols: usize, frames: usize) -> Dataset {
+        let target = Target {
+            rows,
+            cols,
+            spacing: 0.05,
+        };
+        let mut obs = Vec::new();
+        for f in 0..frames as i64 {
+            for c in 0..rows * cols {
+                obs.push((0, f, c, [0.0, 0.0]));
+            }
+        }
+        Dataset::from_keyed(
+            target,
+            vec![CameraSpec::new("c", 640, 480, Default::default())],
+            obs,
+        )
+    }
+
+    #[test]
+    fn neighbours_see_the_noise_and_not_a_smooth_error() {
+        let d = board(9, 12, 20);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let noise = Normal::new(0.0, 0.15).unwrap();
+        let residuals: Vec<f64> = d
+            .observations
+            .iter()
+            .flat_map(|o| {
+                // A smooth systematic error of up to 2 px across the board.
+                let (col, row) = ((o.corner % 12) as f64, (o.corner / 12) as f64);
+                let smooth = 2.0 * ((col - 5.5) / 5.5).powi(2) + 0.5 * row / 8.0;
+                [
+                    smooth + noise.sample(&mut rng),
+                    -smooth + noise.sample(&mut rng),
+                ]
+            })
+            .collect();
+        let sigma = noise_from_neighbours(&d, &residuals).unwrap();
+        assert!((sigma - 0.15).abs() < 0.015, "{sigma}");
+        // All of the smooth error is bias.
+        let t = assess(&residuals, 10, sigma, "neighbours");
+        assert!(t.bias_ratio > 0.9, "{t:?}");
+    }
+
+    #[test]
+    fn pure_noise_has_no_bias() {
+        let d = board(9, 12, 20);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
+        let noise = Normal::new(0.0, 0.2).unwrap();
+        let residuals: Vec<f64> = (0..2 * d.observations.len())
+            .map(|_| noise.sample(&mut rng))
+            .collect();
+        let t = assess(&residuals, 0, 0.2, "config");
+        assert!(t.bias_ratio < 0.05, "{t:?}");
+        // G-AIC is the residual sum plus the parameter penalty.
+        let sum: f64 = residuals.iter().map(|r| r * r).sum();
+        let with_p = assess(&residuals, 100, 0.2, "config");
+        assert!((with_p.g_aic - sum - 2.0 * 100.0 * 0.04).abs() < 1e-9);
+    }
+}

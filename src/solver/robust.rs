@@ -1,0 +1,387 @@
+//! Guards of the calibration pipeline against confident wrong answers: screening
+//! the observations before initialisation (outside the image, views that fit no
+//! planar board), refusing solves that made no progress or whose cost is not
+//! finite, rejecting outliers after the robust solve (mrcal's scheme), and warning
+//! when the views cannot determine the focal length. The pipeline in
+//! `calibrate.rs` calls these; they hold no state of their own.
+use crate::error::{Error, Result};
+use crate::model::board::Method;
+use crate::model::dataset::{Dataset, Observation};
+use crate::model::zhang;
+use crate::solver::problem::{rmse, Problem, SolveReport, SolverSettings, State};
+use nalgebra::Vector2;
+use std::collections::{BTreeMap, HashMap};
+
+/// How far outside the image (as a fraction of its width or height) a corner may
+/// lie before it is dropped: detectors report corners up to the border, and a few
+/// pixels beyond is rounding, not data.
+pub const OUTSIDE_MARGIN: f64 = 0.02;
+
+/// At most this many items are named in one warning.
+const NAMED: usize = 5;
+
+/// "frame 7" with one camera, "cam1 frame 7" with several.
+fn view_name(dataset: &Dataset, camera: usize, frame: usize) -> String {
+    if dataset.cameras.len() == 1 {
+        format!("frame {}", dataset.frame_ids[frame])
+    } else {
+        format!(
+            "{} frame {}",
+            dataset.cameras[camera].name, dataset.frame_ids[frame]
+        )
+    }
+}
+
+/// A list cut to its first few items.
+fn named(items: &[String]) -> String {
+    let mut s = items[..items.len().min(NAMED)].join(", ");
+    if items.len() > NAMED {
+        s.push_str(&format!(" and {} more", items.len() - NAMED));
+    }
+    s
+}
+
+/// Drops the observations outside their camera's image by more than
+/// [`OUTSIDE_MARGIN`], naming them in a warning; refuses data with none inside.
+pub fn drop_outside_image(dataset: &Dataset, warnings: &mut Vec<String>) -> Result<Dataset> {
+    let inside = |o: &Observation| {
+        let c = &dataset.cameras[o.camera];
+        let (w, h) = (c.width as f64, c.height as f64);
+        let (mu, mv) = (OUTSIDE_MARGIN * w, OUTSIDE_MARGIN * h);
+        (-0.5 - mu..=w - 0.5 + mu).contains(&o.uv[0])
+            && (-0.5 - mv..=h - 0.5 + mv).contains(&o.uv[1])
+    };
+    let outside: Vec<String> = dataset
+        .observations
+        .iter()
+        .filter(|o| !inside(o))
+        .map(|o| {
+            format!(
+                "{} corner {} at ({:.1}, {:.1})",
+                view_name(dataset, o.camera, o.frame),
+                o.corner,
+                o.uv[0],
+                o.uv[1]
+            )
+        })
+        .collect();
+    if outside.is_empty() {
+        return Ok(dataset.clone());
+    }
+    if outside.len() == dataset.observations.len() {
+        let sizes: Vec<String> = dataset
+            .cameras
+            .iter()
+            .map(|c| format!("{} {}×{}", c.name, c.width, c.height))
+            .collect();
+        return Err(Error::Degenerate(format!(
+            "every observation lies outside its image ({}): check the cameras' width and height",
+            sizes.join(", ")
+        )));
+    }
+    warnings.push(format!(
+        "{} observation(s) outside the image dropped: {}",
+        outside.len(),
+        named(&outside)
+    ));
+    let mut kept = dataset.clone();
+    kept.observations.retain(inside);
+    Ok(kept)
+}
+
+/// A view's homography may miss its corners by this fraction of the view's size in
+/// pixels (RMS) before it is judged not to show the board as numbered: lens
+/// distortion bends a view by a few percent, a shuffled or mis-sized numbering by
+/// tens of percent.
+const MAX_HOMOGRAPHY_MISFIT: f64 = 0.08;
+
+/// RMS misfit of the best homography of a view, relative to the view's pixel extent;
+/// `None` when it has too few corners for one.
+fn homography_misfit(board: &[Vector2<f64>], image: &[Vector2<f64>]) -> Option<f64> {
+    let h = zhang::homography(board, image)?;
+    let mut sum = 0.0;
+    for (b, i) in board.iter().zip(image) {
+        let p = h * nalgebra::Vector3::new(b.x, b.y, 1.0);
+        let e = Vector2::new(p.x / p.z, p.y / p.z) - i;
+        sum += e.norm_squared();
+    }
+    let (mut lo, mut hi) = (image[0], image[0]);
+    for p in image {
+        lo = lo.inf(p);
+        hi = hi.sup(p);
+    }
+    let extent = (hi - lo).norm().max(1.0);
+    let misfit = (sum / board.len() as f64).sqrt() / extent;
+    Some(if misfit.is_finite() { misfit } else { f64::MAX })
+}
+
+/// Board points and pixels of one view.
+type Correspondences = (Vec<Vector2<f64>>, Vec<Vector2<f64>>);
+
+/// Drops the views whose corners no planar board numbered as `[target]` explains
+/// (a frame with shuffled corner indices), naming them; when no view fits, says what
+/// is likely wrong instead of failing later with a misleading message.
+pub fn drop_inconsistent_views(dataset: &Dataset, warnings: &mut Vec<String>) -> Result<Dataset> {
+    let mut views: BTreeMap<(usize, usize), Correspondences> = BTreeMap::new();
+    for o in &dataset.observations {
+        let p = dataset.target.nominal(o.corner);
+        let e = views.entry((o.frame, o.camera)).or_default();
+        e.0.push(Vector2::new(p.x, p.y));
+        e.1.push(Vector2::new(o.uv[0], o.uv[1]));
+    }
+    let mut bad = Vec::new();
+    let mut fitted = 0;
+    for (&(frame, camera), (b, i)) in &views {
+        if let Some(m) = homography_misfit(b, i) {
+            fitted += 1;
+            if m > MAX_HOMOGRAPHY_MISFIT {
+                bad.push(((camera, frame), m));
+            }
+        }
+    }
+    if bad.is_empty() {
+        return Ok(dataset.clone());
+    }
+    let t = dataset.target;
+    if bad.len() == fitted {
+        return Err(Error::Degenerate(format!(
+            "no view's corners fit a planar {} × {} board with corner i = row·{} + col \
+             (misfit {:.0}% of the view's size or more): check target.rows and target.cols \
+             (swapped?) and the corner numbering",
+            t.rows,
+            t.cols,
+            t.cols,
+            100.0 * bad.iter().map(|b| b.1).fold(f64::MAX, f64::min)
+        )));
+    }
+    let names: Vec<String> = bad
+        .iter()
+        .map(|&((c, f), m)| format!("{} ({:.0}%)", view_name(dataset, c, f), 100.0 * m))
+        .collect();
+    warnings.push(format!(
+        "{} view(s) dropped: their corners fit no planar board numbered as [target] (shuffled or wrong corner indices?): {}",
+        bad.len(),
+        named(&names)
+    ));
+    let drop: std::collections::HashSet<(usize, usize)> = bad.iter().map(|b| b.0).collect();
+    let mut kept = dataset.clone();
+    kept.observations
+        .retain(|o| !drop.contains(&(o.camera, o.frame)));
+    Ok(kept)
+}
+
+/// A solve that stops without a step from a start this far off (RMSE, pixels) made
+/// no progress: the cost underflowed or is flat, it did not converge.
+const POOR_START_PX: f64 = 2.0;
+
+/// Refuses a stage whose cost is not finite or underflows, or that "converged"
+/// without a single step from a fresh start (Zhang's, or `standard`'s for a
+/// deformation method: neither is ever the optimum) or from a poor one: all leave
+/// the starting point as the answer. Only a re-solve after outlier rejection
+/// (`fresh` false) may legitimately stop at once.
+pub fn check_stage(method: Method, report: &SolveReport, fresh: bool) -> Result<()> {
+    if !(report.initial_cost.is_finite() && report.final_cost.is_finite())
+        || report.residuals.iter().any(|r| !r.is_finite())
+    {
+        return Err(Error::Solver(format!(
+            "the {method} solve failed: its cost is not finite (initial {}, final {})",
+            report.initial_cost, report.final_cost
+        )));
+    }
+    let start = rmse(&report.residuals);
+    // A zero cost with non-zero residuals is an underflow, not a perfect fit.
+    if report.final_cost <= 0.0 && start > 1e-9 {
+        return Err(Error::Solver(format!(
+            "the {method} solve failed: the cost underflows to zero at an RMSE of {start:.3} px; \
+             check loss_scale_px and the observation weights"
+        )));
+    }
+    if report.iterations <= 0 && (fresh || start > POOR_START_PX) {
+        return Err(Error::Solver(format!(
+            "the {method} solve made no progress from its start (RMSE {start:.3} px after 0 iterations): \
+             the cost is flat or underflows; check loss_scale_px and the observation weights"
+        )));
+    }
+    Ok(())
+}
+
+/// An observation that outlier rejection removed, with its residual when rejected.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Rejected {
+    pub observation: Observation,
+    pub residual_px: f64,
+}
+
+/// Rounds of rejection and re-solve at most; each round only adds rejections, so
+/// this bounds the work, not the answer (it is stable long before).
+const MAX_REJECTION_ROUNDS: usize = 10;
+
+/// Share of rejected observations above which the data are called unreliable.
+pub const WARN_REJECTED_FRACTION: f64 = 0.1;
+
+/// The result of outlier rejection: the data kept, the final residuals, the
+/// corners whose correction is frozen, the extra solves and the rejected.
+pub struct Rejection {
+    pub dataset: Dataset,
+    pub residuals: Vec<f64>,
+    pub frozen: Vec<usize>,
+    pub reports: Vec<SolveReport>,
+    pub rejected: Vec<Rejected>,
+}
+
+/// σ of one pixel coordinate, robustly: 1.4826 × the median absolute residual
+/// (the normal distribution's MAD), so outliers do not inflate it.
+fn robust_sigma(residuals: &[f64]) -> f64 {
+    let mut a: Vec<f64> = residuals.iter().map(|r| r.abs()).collect();
+    if a.is_empty() {
+        return 0.0;
+    }
+    let mid = a.len() / 2;
+    let (_, m, _) = a.select_nth_unstable_by(mid, f64::total_cmp);
+    1.4826 * *m
+}
+
+/// Which observations to reject this round: a coordinate beyond k·σ, worst first,
+/// as long as their view keeps enough corners for a homography.
+fn pick_outliers(dataset: &Dataset, residuals: &[f64], k: f64) -> Vec<usize> {
+    let sigma = robust_sigma(residuals);
+    if sigma <= 0.0 {
+        return Vec::new();
+    }
+    let mut per_view: HashMap<(usize, usize), usize> = HashMap::new();
+    for o in &dataset.observations {
+        *per_view.entry((o.camera, o.frame)).or_default() += 1;
+    }
+    let mut worst: Vec<(usize, f64)> = residuals
+        .chunks(2)
+        .enumerate()
+        .map(|(i, r)| (i, r[0].abs().max(r[1].abs())))
+        .filter(|&(_, e)| e > k * sigma)
+        .collect();
+    worst.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let mut out = Vec::new();
+    for (i, _) in worst {
+        let o = &dataset.observations[i];
+        let n = per_view.get_mut(&(o.camera, o.frame)).expect("counted");
+        if *n > MIN_VIEW_CORNERS {
+            *n -= 1;
+            out.push(i);
+        }
+    }
+    out.sort_unstable();
+    out
+}
+
+/// Corners a view keeps at least (a homography needs four; the pipeline's
+/// `MIN_CORNERS_PER_IMAGE`, restated to keep this module below the pipeline).
+const MIN_VIEW_CORNERS: usize = 4;
+
+/// mrcal's outlier rejection: after the robust solve, drop the observations with a
+/// coordinate beyond `settings.outlier_k`·σ (σ estimated robustly), re-solve from
+/// the current state, and repeat until no observation is dropped.
+pub fn reject_outliers(
+    problem: Problem<'_>,
+    state: &mut State,
+    settings: &SolverSettings,
+    residuals: Vec<f64>,
+) -> Result<Rejection> {
+    let mut dataset = problem.dataset.clone();
+    let mut out = Rejection {
+        dataset: dataset.clone(),
+        residuals,
+        frozen: problem.frozen.clone(),
+        reports: Vec::new(),
+        rejected: Vec::new(),
+    };
+    if settings.outlier_k <= 0.0 {
+        return Ok(out);
+    }
+    for _ in 0..MAX_REJECTION_ROUNDS {
+        let drop = pick_outliers(&dataset, &out.residuals, settings.outlier_k);
+        if drop.is_empty() {
+            break;
+        }
+        let mut keep = vec![true; dataset.observations.len()];
+        for &i in &drop {
+            keep[i] = false;
+            let r = &out.residuals[2 * i..2 * i + 2];
+            out.rejected.push(Rejected {
+                observation: dataset.observations[i],
+                residual_px: r[0].hypot(r[1]),
+            });
+        }
+        let mut it = keep.iter();
+        dataset
+            .observations
+            .retain(|_| *it.next().expect("one flag per observation"));
+        // A corner that lost its views keeps its correction, like one never seen.
+        let mut frozen = problem.frozen.clone();
+        if problem.method.has_correction() {
+            for c in crate::solver::problem::underobserved_corners(&dataset) {
+                if !frozen.contains(&c) && !problem.gauge.contains(&c) {
+                    frozen.push(c);
+                }
+            }
+        }
+        let p = Problem {
+            dataset: &dataset,
+            method: problem.method,
+            gauge: problem.gauge.clone(),
+            frozen: frozen.clone(),
+            hold: problem.hold,
+        };
+        let report = p.solve(state, settings)?;
+        check_stage(problem.method, &report, false)?;
+        out.residuals = report.residuals.clone();
+        out.frozen = frozen;
+        out.reports.push(report);
+    }
+    out.dataset = dataset;
+    Ok(out)
+}
+
+/// Views whose board spans less than this fraction of its distance in depth show
+/// almost no perspective: the focal length then trades off against the distance.
+const MIN_PERSPECTIVE: f64 = 0.05;
+
+/// Warns when no view shows enough perspective to determine a camera's focal
+/// length (a small board far away): the fit can be excellent and the intrinsics
+/// wrong by tens of pixels.
+pub fn weak_intrinsics_warnings(dataset: &Dataset, state: &State, warnings: &mut Vec<String>) {
+    let t = &dataset.target;
+    for (k, cam) in dataset.cameras.iter().enumerate() {
+        let mut frames: Vec<usize> = dataset
+            .observations
+            .iter()
+            .filter(|o| o.camera == k)
+            .map(|o| o.frame)
+            .collect();
+        frames.sort_unstable();
+        frames.dedup();
+        let best = frames
+            .iter()
+            .map(|&j| {
+                let pose = state.camera_poses[k].compose(&state.frame_poses[j]);
+                let depths: Vec<f64> = [0, t.cols - 1, (t.rows - 1) * t.cols, t.num_corners() - 1]
+                    .iter()
+                    .map(|&i| pose.transform(&t.nominal(i)).z)
+                    .collect();
+                let (lo, hi) = depths
+                    .iter()
+                    .fold((f64::MAX, f64::MIN), |(a, b), &z| (a.min(z), b.max(z)));
+                let mean = depths.iter().sum::<f64>() / depths.len() as f64;
+                (hi - lo) / mean.abs().max(1e-12)
+            })
+            .fold(0.0, f64::max);
+        if best < MIN_PERSPECTIVE {
+            warnings.push(format!(
+                "{}: the intrinsics are poorly determined: in no view does the board span more than {:.1}% of its distance in depth \
+                 (at least {:.0}% is needed), so the focal length trades off against the distance; \
+                 bring the board closer or tilt it more",
+                cam.name,
+                100.0 * best,
+                100.0 * MIN_PERSPECTIVE
+            ));
+        }
+    }
+}
