@@ -199,6 +199,174 @@ unsafe fn slice<'a, T>(p: *const T, n: usize, what: &str) -> Result<&'a [T], Str
     Ok(std::slice::from_raw_parts(p, n))
 }
 
+/// The board of a `DcTarget`, refused when too small or too large.
+///
+/// # Safety
+/// `target` is null or points to a `DcTarget`.
+unsafe fn target_from(target: *const DcTarget) -> Result<Target, CError> {
+    let t = target.as_ref().ok_or("target is NULL")?;
+    if t.rows < 2 || t.cols < 2 || !(t.spacing.is_finite() && t.spacing > 0.0) {
+        return Err("target: rows and cols must be at least 2 and spacing positive".into());
+    }
+    if (t.rows as usize)
+        .checked_mul(t.cols as usize)
+        .is_none_or(|n| n > MAX_CORNERS)
+    {
+        return Err(format!(
+            "target: a board of {} × {} corners is too large (at most {MAX_CORNERS} corners)",
+            t.rows, t.cols
+        )
+        .into());
+    }
+    Ok(Target {
+        rows: t.rows as usize,
+        cols: t.cols as usize,
+        spacing: t.spacing,
+    })
+}
+
+/// The cameras of a `DcCamera` array: named (`cam<k>` when unnamed), sized and distinct.
+///
+/// # Safety
+/// `cameras` is null (only when `num_cameras` is 0) or holds `num_cameras` entries
+/// whose strings are null or NUL-terminated.
+unsafe fn camera_specs(
+    cameras: *const DcCamera,
+    num_cameras: usize,
+) -> Result<Vec<CameraSpec>, CError> {
+    if num_cameras > MAX_CAMERAS {
+        return Err(format!("{num_cameras} cameras; at most {MAX_CAMERAS} are supported").into());
+    }
+    let cams = slice(cameras, num_cameras, "cameras")?;
+    if cams.is_empty() {
+        return Err("at least one camera is needed".into());
+    }
+    let specs = cams
+        .iter()
+        .enumerate()
+        .map(|(k, c)| {
+            Ok(CameraSpec {
+                name: if c.name.is_null() {
+                    format!("cam{k}")
+                } else {
+                    string(c.name, "camera name")?
+                },
+                width: c.width,
+                height: c.height,
+                model: lens_model(c.model)?,
+                fix: Vec::new(),
+            })
+        })
+        .collect::<Result<Vec<_>, CError>>()?;
+    if specs.iter().any(|c| c.width == 0 || c.height == 0) {
+        return Err("camera width and height must be positive".into());
+    }
+    for (k, c) in specs.iter().enumerate() {
+        if let Some(j) = specs[..k].iter().position(|o| o.name == c.name) {
+            return Err(format!(
+                "cameras {j} and {k} are both named `{}`; camera names must differ",
+                short(&c.name)
+            )
+            .into());
+        }
+    }
+    Ok(specs)
+}
+
+/// The dataset of a `DcObservation` array, every observation in range, finite and unique.
+///
+/// # Safety
+/// `observations` is null (only when `num_observations` is 0) or holds
+/// `num_observations` entries.
+unsafe fn dataset_from(
+    target: Target,
+    specs: Vec<CameraSpec>,
+    observations: *const DcObservation,
+    num_observations: usize,
+) -> Result<Dataset, CError> {
+    let obs = slice(observations, num_observations, "observations")?;
+    let mut seen = std::collections::HashSet::new();
+    let mut rows = Vec::with_capacity(obs.len());
+    for (i, o) in obs.iter().enumerate() {
+        if o.camera as usize >= specs.len() || o.corner as usize >= target.num_corners() {
+            return Err(format!(
+                "observation {i}: camera {} or corner {} out of range",
+                o.camera, o.corner
+            )
+            .into());
+        }
+        if !(o.u.is_finite() && o.v.is_finite()) {
+            return Err(format!("observation {i}: pixel is not finite").into());
+        }
+        if !seen.insert((o.camera, o.frame, o.corner)) {
+            return Err(format!("observation {i}: duplicate camera, frame and corner").into());
+        }
+        rows.push((o.camera as usize, o.frame, o.corner as usize, [o.u, o.v]));
+    }
+    if rows.is_empty() {
+        return Err("no observations".into());
+    }
+    Ok(Dataset::from_keyed(target, specs, rows))
+}
+
+/// The method and solver settings of `DcOptions`; null options or method mean the defaults.
+///
+/// # Safety
+/// `options` is null or points to a `DcOptions` whose `method` is null or NUL-terminated.
+unsafe fn request_from(options: *const DcOptions) -> Result<Request, CError> {
+    let o = options.as_ref();
+    let method = match o.map(|o| o.method).filter(|m| !m.is_null()) {
+        Some(m) => {
+            let name = string(m, "method")?;
+            Method::parse(&name).ok_or(format!("unknown method `{name}`"))?
+        }
+        None => Method::Full,
+    };
+    let settings = match o {
+        Some(o) => settings_from(o)?,
+        None => SolverSettings::default(),
+    };
+    Ok(Request {
+        method,
+        settings,
+        gauge: None,
+    })
+}
+
+/// Copies a calibration into the caller's result and per-camera results.
+///
+/// # Safety
+/// `result` is null or valid; `camera_results` holds `num_cameras` entries.
+unsafe fn write_results(
+    c: &crate::Calibration,
+    result: *mut DcResult,
+    camera_results: *mut DcCameraResult,
+    num_cameras: usize,
+) -> Result<(), CError> {
+    let out = result.as_mut().ok_or("result is NULL")?;
+    *out = DcResult {
+        rmse_px: c.rmse_px,
+        converged: c.converged as i32,
+        iterations: c.iterations(),
+        observations: c.dataset.observations.len() as u64,
+        frames: c.dataset.num_frames() as u64,
+        max_out_of_plane_m: c.max_out_of_plane(),
+    };
+    for k in 0..num_cameras {
+        let i = c.state.intrinsics[k];
+        let p = c.state.camera_poses[k];
+        let mut params = [0.0; MAX_PARAMS];
+        params[..i.params().len()].copy_from_slice(i.params());
+        *camera_results.add(k) = DcCameraResult {
+            num_params: i.params().len() as u32,
+            params,
+            rotation: p.rotation,
+            translation: p.translation,
+        };
+    }
+    Ok(())
+}
+
 /// Calibrates from in-memory observations; see `include/deformcal.h`.
 ///
 /// # Safety
@@ -225,128 +393,12 @@ pub unsafe extern "C" fn deformcal_calibrate(
         if camera_results.is_null() {
             return Err("camera_results is NULL".into());
         }
-        let t = target.as_ref().ok_or("target is NULL")?;
-        if t.rows < 2 || t.cols < 2 || !(t.spacing.is_finite() && t.spacing > 0.0) {
-            return Err("target: rows and cols must be at least 2 and spacing positive".into());
-        }
-        if (t.rows as usize)
-            .checked_mul(t.cols as usize)
-            .is_none_or(|n| n > MAX_CORNERS)
-        {
-            return Err(format!(
-                "target: a board of {} × {} corners is too large (at most {MAX_CORNERS} corners)",
-                t.rows, t.cols
-            )
-            .into());
-        }
-        let target = Target {
-            rows: t.rows as usize,
-            cols: t.cols as usize,
-            spacing: t.spacing,
-        };
-        if num_cameras > MAX_CAMERAS {
-            return Err(
-                format!("{num_cameras} cameras; at most {MAX_CAMERAS} are supported").into(),
-            );
-        }
-        let cams = slice(cameras, num_cameras, "cameras")?;
-        if cams.is_empty() {
-            return Err("at least one camera is needed".into());
-        }
-        let specs = cams
-            .iter()
-            .enumerate()
-            .map(|(k, c)| {
-                Ok(CameraSpec {
-                    name: if c.name.is_null() {
-                        format!("cam{k}")
-                    } else {
-                        string(c.name, "camera name")?
-                    },
-                    width: c.width,
-                    height: c.height,
-                    model: lens_model(c.model)?,
-                    fix: Vec::new(),
-                })
-            })
-            .collect::<Result<Vec<_>, CError>>()?;
-        if specs.iter().any(|c| c.width == 0 || c.height == 0) {
-            return Err("camera width and height must be positive".into());
-        }
-        for (k, c) in specs.iter().enumerate() {
-            if let Some(j) = specs[..k].iter().position(|o| o.name == c.name) {
-                return Err(format!(
-                    "cameras {j} and {k} are both named `{}`; camera names must differ",
-                    short(&c.name)
-                )
-                .into());
-            }
-        }
-        let obs = slice(observations, num_observations, "observations")?;
-        let mut seen = std::collections::HashSet::new();
-        let mut rows = Vec::with_capacity(obs.len());
-        for (i, o) in obs.iter().enumerate() {
-            if o.camera as usize >= specs.len() || o.corner as usize >= target.num_corners() {
-                return Err(format!(
-                    "observation {i}: camera {} or corner {} out of range",
-                    o.camera, o.corner
-                )
-                .into());
-            }
-            if !(o.u.is_finite() && o.v.is_finite()) {
-                return Err(format!("observation {i}: pixel is not finite").into());
-            }
-            if !seen.insert((o.camera, o.frame, o.corner)) {
-                return Err(format!("observation {i}: duplicate camera, frame and corner").into());
-            }
-            rows.push((o.camera as usize, o.frame, o.corner as usize, [o.u, o.v]));
-        }
-        if rows.is_empty() {
-            return Err("no observations".into());
-        }
-        let dataset = Dataset::from_keyed(target, specs, rows);
-        let o = options.as_ref();
-        let method = match o.map(|o| o.method).filter(|m| !m.is_null()) {
-            Some(m) => {
-                let name = string(m, "method")?;
-                Method::parse(&name).ok_or(format!("unknown method `{name}`"))?
-            }
-            None => Method::Full,
-        };
-        let settings = match o {
-            Some(o) => settings_from(o)?,
-            None => SolverSettings::default(),
-        };
-        let c = calibrate(
-            &dataset,
-            &Request {
-                method,
-                settings,
-                gauge: None,
-            },
-        )?;
-        let out = result.as_mut().ok_or("result is NULL")?;
-        *out = DcResult {
-            rmse_px: c.rmse_px,
-            converged: c.converged as i32,
-            iterations: c.iterations(),
-            observations: c.dataset.observations.len() as u64,
-            frames: c.dataset.num_frames() as u64,
-            max_out_of_plane_m: c.max_out_of_plane(),
-        };
-        for k in 0..num_cameras {
-            let i = c.state.intrinsics[k];
-            let p = c.state.camera_poses[k];
-            let mut params = [0.0; MAX_PARAMS];
-            params[..i.params().len()].copy_from_slice(i.params());
-            *camera_results.add(k) = DcCameraResult {
-                num_params: i.params().len() as u32,
-                params,
-                rotation: p.rotation,
-                translation: p.translation,
-            };
-        }
-        Ok(())
+        let target = target_from(target)?;
+        let specs = camera_specs(cameras, num_cameras)?;
+        let dataset = dataset_from(target, specs, observations, num_observations)?;
+        let request = request_from(options)?;
+        let c = calibrate(&dataset, &request)?;
+        write_results(&c, result, camera_results, num_cameras)
     })
 }
 

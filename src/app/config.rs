@@ -608,36 +608,7 @@ impl Checker<'_> {
         let (target, cameras) = match &data {
             DataSource::Synthetic {
                 preset, cameras: n, ..
-            } => {
-                let spec = preset.spec();
-                if let Some(t) = &raw.target {
-                    if *t != spec.target {
-                        return Err(self.err(format!(
-                            "[target] differs from the `{}` preset's board ({} × {}, {} m); remove it or use observations",
-                            preset.name(), spec.target.rows, spec.target.cols, spec.target.spacing
-                        )));
-                    }
-                }
-                let cameras = if raw.cameras.is_empty() {
-                    preset.cameras(*n)
-                } else if raw.cameras.len() != *n {
-                    return Err(self.err(format!(
-                        "[[cameras]] lists {} camera(s) but the synthetic rig has {n}; set data.cameras or remove [[cameras]]",
-                        raw.cameras.len()
-                    )));
-                } else {
-                    for (given, simulated) in raw.cameras.iter().zip(preset.cameras(*n)) {
-                        if (given.width, given.height) != (simulated.width, simulated.height) {
-                            return Err(self.err(format!(
-                                "[[cameras]] `{}` differs from the simulated {}×{} camera; only the name, model and fix may be changed",
-                                given.name, simulated.width, simulated.height
-                            )));
-                        }
-                    }
-                    raw.cameras.clone()
-                };
-                (spec.target, cameras)
-            }
+            } => self.synthetic_rig(preset, *n, raw.target.as_ref(), &raw.cameras)?,
             DataSource::Observations(_)
             | DataSource::CornersVnl { .. }
             | DataSource::Photos { .. } => {
@@ -654,88 +625,14 @@ impl Checker<'_> {
         };
         self.check_target("target", &target)?;
         self.check_camera_names(&cameras)?;
-        for (k, c) in cameras.iter().enumerate() {
-            if c.width == 0 || c.height == 0 {
-                let key = if c.width == 0 { "width" } else { "height" };
-                return Err(self.err(format!(
-                    "cameras[{k}].{key} of `{}` must be positive",
-                    c.name
-                )));
-            }
-            if let Some(name) = c.unknown_fixed() {
-                return Err(self.err(format!(
-                    "cameras[{k}].fix: `{name}` is not a parameter of `{}` (its parameters: {})",
-                    c.model,
-                    c.model.param_names().join(", ")
-                )));
-            }
-        }
-
-        let reference = match raw.reference {
-            None => None,
-            Some(r) => {
-                let source = self.source(
-                    "reference",
-                    r.observations,
-                    r.synthetic,
-                    r.images,
-                    r.seed,
-                    r.cameras,
-                )?;
-                let default_target = match &source {
-                    DataSource::Synthetic { preset, .. } => preset.spec().target,
-                    _ => target,
-                };
-                let t = Target {
-                    rows: r.rows.unwrap_or(default_target.rows),
-                    cols: r.cols.unwrap_or(default_target.cols),
-                    spacing: r.spacing.unwrap_or(default_target.spacing),
-                };
-                self.check_target("reference", &t)?;
-                Some(ReferenceConfig { source, target: t })
-            }
-        };
-
-        let c = &raw.calibration;
-        self.check_calibration(c, &target)?;
-        if c.threads == 0 || c.threads > 256 {
-            return Err(self.err(format!(
-                "calibration.threads must be 1 to 256 (got {})",
-                c.threads
-            )));
-        }
-        for (key, v) in [
-            ("function_tolerance", c.function_tolerance),
-            ("gradient_tolerance", c.gradient_tolerance),
-            ("parameter_tolerance", c.parameter_tolerance),
-        ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(self.err(format!(
-                    "calibration.{key} must be a non-negative number (got {v})"
-                )));
-            }
-        }
+        self.check_camera_params(&cameras)?;
+        let reference = self.reference(raw.reference, target)?;
+        self.check_calibration(&raw.calibration, &target)?;
+        self.check_solver_limits(&raw.calibration)?;
         if let Some(p) = &raw.protocol {
             self.check_protocol(p)?;
         }
-        if let DataSource::CornersVnl { patterns, .. } = &data {
-            if let Some(unknown) = patterns
-                .keys()
-                .find(|k| !cameras.iter().any(|c| &c.name == *k))
-            {
-                return Err(self.err(format!(
-                    "data.camera_patterns names `{unknown}`, which is not a camera of [[cameras]]"
-                )));
-            }
-            if cameras.len() > 1 {
-                if let Some(c) = cameras.iter().find(|c| !patterns.contains_key(&c.name)) {
-                    return Err(self.err(format!(
-                        "data.camera_patterns needs a pattern for camera `{}`",
-                        c.name
-                    )));
-                }
-            }
-        }
+        self.check_camera_patterns(&data, &cameras)?;
         if let DataSource::Photos { patterns, .. } = &data {
             self.check_photo_cameras(patterns, &cameras)?;
         }
@@ -753,6 +650,139 @@ impl Checker<'_> {
             protocol: raw.protocol,
             output_dir,
         })
+    }
+
+    /// A synthetic source's board and cameras; `[target]`/`[[cameras]]` must agree with them.
+    fn synthetic_rig(
+        &self,
+        preset: &Preset,
+        n: usize,
+        target: Option<&Target>,
+        cameras: &[CameraSpec],
+    ) -> Result<(Target, Vec<CameraSpec>)> {
+        let spec = preset.spec();
+        if let Some(t) = target {
+            if *t != spec.target {
+                return Err(self.err(format!(
+                    "[target] differs from the `{}` preset's board ({} × {}, {} m); remove it or use observations",
+                    preset.name(), spec.target.rows, spec.target.cols, spec.target.spacing
+                )));
+            }
+        }
+        if cameras.is_empty() {
+            return Ok((spec.target, preset.cameras(n)));
+        }
+        if cameras.len() != n {
+            return Err(self.err(format!(
+                "[[cameras]] lists {} camera(s) but the synthetic rig has {n}; set data.cameras or remove [[cameras]]",
+                cameras.len()
+            )));
+        }
+        for (given, simulated) in cameras.iter().zip(preset.cameras(n)) {
+            if (given.width, given.height) != (simulated.width, simulated.height) {
+                return Err(self.err(format!(
+                    "[[cameras]] `{}` differs from the simulated {}×{} camera; only the name, model and fix may be changed",
+                    given.name, simulated.width, simulated.height
+                )));
+            }
+        }
+        Ok((spec.target, cameras.to_vec()))
+    }
+
+    /// Each camera's image size is positive and its fixed parameters are its model's.
+    fn check_camera_params(&self, cameras: &[CameraSpec]) -> Result<()> {
+        for (k, c) in cameras.iter().enumerate() {
+            if c.width == 0 || c.height == 0 {
+                let key = if c.width == 0 { "width" } else { "height" };
+                return Err(self.err(format!(
+                    "cameras[{k}].{key} of `{}` must be positive",
+                    c.name
+                )));
+            }
+            if let Some(name) = c.unknown_fixed() {
+                return Err(self.err(format!(
+                    "cameras[{k}].fix: `{name}` is not a parameter of `{}` (its parameters: {})",
+                    c.model,
+                    c.model.param_names().join(", ")
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// `[reference]`: its source, and its board (defaulting to the preset's or the data's).
+    fn reference(
+        &self,
+        raw: Option<RawReference>,
+        target: Target,
+    ) -> Result<Option<ReferenceConfig>> {
+        let Some(r) = raw else {
+            return Ok(None);
+        };
+        let source = self.source(
+            "reference",
+            r.observations,
+            r.synthetic,
+            r.images,
+            r.seed,
+            r.cameras,
+        )?;
+        let default_target = match &source {
+            DataSource::Synthetic { preset, .. } => preset.spec().target,
+            _ => target,
+        };
+        let t = Target {
+            rows: r.rows.unwrap_or(default_target.rows),
+            cols: r.cols.unwrap_or(default_target.cols),
+            spacing: r.spacing.unwrap_or(default_target.spacing),
+        };
+        self.check_target("reference", &t)?;
+        Ok(Some(ReferenceConfig { source, target: t }))
+    }
+
+    /// `[calibration]` threads and tolerances within what Ceres accepts.
+    fn check_solver_limits(&self, c: &CalibrationConfig) -> Result<()> {
+        if c.threads == 0 || c.threads > 256 {
+            return Err(self.err(format!(
+                "calibration.threads must be 1 to 256 (got {})",
+                c.threads
+            )));
+        }
+        for (key, v) in [
+            ("function_tolerance", c.function_tolerance),
+            ("gradient_tolerance", c.gradient_tolerance),
+            ("parameter_tolerance", c.parameter_tolerance),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(self.err(format!(
+                    "calibration.{key} must be a non-negative number (got {v})"
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// `data.camera_patterns` names only known cameras, and all of them when there are several.
+    fn check_camera_patterns(&self, data: &DataSource, cameras: &[CameraSpec]) -> Result<()> {
+        if let DataSource::CornersVnl { patterns, .. } = data {
+            if let Some(unknown) = patterns
+                .keys()
+                .find(|k| !cameras.iter().any(|c| &c.name == *k))
+            {
+                return Err(self.err(format!(
+                    "data.camera_patterns names `{unknown}`, which is not a camera of [[cameras]]"
+                )));
+            }
+            if cameras.len() > 1 {
+                if let Some(c) = cameras.iter().find(|c| !patterns.contains_key(&c.name)) {
+                    return Err(self.err(format!(
+                        "data.camera_patterns needs a pattern for camera `{}`",
+                        c.name
+                    )));
+                }
+            }
+        }
+        Ok(())
     }
 }
 

@@ -106,6 +106,270 @@ struct Corner {
     weight: f64,
 }
 
+/// A data error at `line` of the table at `path`.
+fn data_err(path: &Path, line: u64, message: String) -> Error {
+    Error::Data {
+        path: path.into(),
+        line,
+        message,
+    }
+}
+
+/// The table's text: refuses binary and non-UTF-8 input, drops a byte-order mark.
+fn table_text<'a>(bytes: &'a [u8], path: &Path) -> Result<&'a str> {
+    if bytes.contains(&0) {
+        return Err(data_err(
+            path,
+            1,
+            "this is a binary file, not a corners.vnl table".into(),
+        ));
+    }
+    let text = std::str::from_utf8(bytes)
+        .map_err(|_| data_err(path, 1, "not a UTF-8 text file".into()))?;
+    // Editors on Windows start UTF-8 files with a byte-order mark.
+    Ok(text.strip_prefix('\u{feff}').unwrap_or(text))
+}
+
+/// Refuses several cameras unless every one has a pattern to tell its images apart.
+fn check_patterns_cover(
+    path: &Path,
+    cameras: &[CameraSpec],
+    patterns: &BTreeMap<String, String>,
+) -> Result<()> {
+    if cameras.len() > 1 {
+        for c in cameras {
+            if !patterns.contains_key(&c.name) {
+                return Err(Error::Invalid(format!(
+                    "{}: with several cameras, data.camera_patterns needs a pattern for `{}`",
+                    path.display(),
+                    c.name
+                )));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Column positions of the table's fields.
+struct Columns {
+    file: usize,
+    x: usize,
+    y: usize,
+    level: Option<usize>,
+    weight: Option<usize>,
+}
+
+impl Default for Columns {
+    /// Without a vnlog legend: filename x y [level].
+    fn default() -> Self {
+        Columns {
+            file: 0,
+            x: 1,
+            y: 2,
+            level: Some(3),
+            weight: None,
+        }
+    }
+}
+
+/// The columns a vnlog legend (`trimmed`, `#` and all) names.
+fn parse_legend(path: &Path, line: u64, trimmed: &str, legend: &str) -> Result<Columns> {
+    let names: Vec<&str> = legend.split_whitespace().collect();
+    let find = |n: &str| names.iter().position(|&c| c == n);
+    match (find("filename"), find("x"), find("y")) {
+        (Some(file), Some(x), Some(y)) => Ok(Columns {
+            file,
+            x,
+            y,
+            level: find("level"),
+            weight: find("weight"),
+        }),
+        _ => Err(data_err(
+            path,
+            line,
+            format!("legend `{trimmed}` lacks filename, x and y columns"),
+        )),
+    }
+}
+
+/// A numeric field, `None` for `-`.
+fn number(path: &Path, line: u64, s: &str, what: &str) -> Result<Option<f64>> {
+    if s == "-" {
+        return Ok(None);
+    }
+    let v: f64 = s.parse().map_err(|_| {
+        data_err(
+            path,
+            line,
+            format!("{what} `{}` is not a number", crate::app::config::short(s)),
+        )
+    })?;
+    if !v.is_finite() {
+        return Err(data_err(path, line, format!("{what} is not finite ({v})")));
+    }
+    Ok(Some(v))
+}
+
+/// One data row: its image file name and its corner.
+fn parse_row(path: &Path, line: u64, trimmed: &str, cols: &Columns) -> Result<(String, Corner)> {
+    let err = |message: String| data_err(path, line, message);
+    let fields: Vec<&str> = trimmed.split_whitespace().collect();
+    let needed = cols.file.max(cols.x).max(cols.y) + 1;
+    if fields.len() < needed {
+        return Err(err(format!(
+            "expected at least {needed} columns (filename x y), found {}",
+            fields.len()
+        )));
+    }
+    let x = number(path, line, fields[cols.x], "x")?;
+    let y = number(path, line, fields[cols.y], "y")?;
+    let mut weight = 1.0;
+    let mut present = x.is_some() && y.is_some();
+    if let Some(c) = cols.level.filter(|&c| c < fields.len()) {
+        match number(path, line, fields[c], "level")? {
+            // mrgingham: noise doubles with each decimation level.
+            Some(l) if (0.0..=MAX_LEVEL).contains(&l) => weight = 0.5f64.powf(l),
+            Some(l) => return Err(err(format!("level {l} is outside 0..{MAX_LEVEL}"))),
+            None => present = false,
+        }
+    }
+    if let Some(c) = cols.weight.filter(|&c| c < fields.len()) {
+        let (lo, hi) = WEIGHT_RANGE;
+        match number(path, line, fields[c], "weight")? {
+            Some(w) if (lo..=hi).contains(&w) => weight = w,
+            Some(w) if w > 0.0 => return Err(err(format!("weight {w} is outside {lo}..{hi}"))),
+            _ => present = false,
+        }
+    }
+    let corner = Corner {
+        line,
+        xy: if present {
+            Some([x.unwrap_or(0.0), y.unwrap_or(0.0)])
+        } else {
+            None
+        },
+        weight,
+    };
+    Ok((fields[cols.file].to_string(), corner))
+}
+
+/// The table's rows grouped per image, in file order; an image's rows must be contiguous.
+fn group_rows(text: &str, path: &Path) -> Result<Vec<(String, Vec<Corner>)>> {
+    let mut cols = Columns::default();
+    let mut images: Vec<(String, Vec<Corner>)> = Vec::new();
+    let mut seen_data = false;
+    for (i, raw) in text.lines().enumerate() {
+        let line = i as u64 + 1;
+        let trimmed = raw.trim();
+        if trimmed.is_empty() || trimmed.starts_with("##") {
+            continue;
+        }
+        if let Some(legend) = trimmed.strip_prefix('#') {
+            // A legend after the data is a comment.
+            if !seen_data {
+                cols = parse_legend(path, line, trimmed, legend)?;
+            }
+            continue;
+        }
+        seen_data = true;
+        let (file, corner) = parse_row(path, line, trimmed, &cols)?;
+        match images.last_mut() {
+            Some((name, corners)) if *name == file => corners.push(corner),
+            _ => {
+                if images.iter().any(|(n, _)| *n == file) {
+                    return Err(data_err(
+                        path,
+                        line,
+                        format!("the rows of `{file}` are not contiguous"),
+                    ));
+                }
+                images.push((file, vec![corner]));
+            }
+        }
+    }
+    Ok(images)
+}
+
+/// An image's corners with its camera and time-step key.
+type Keyed = (usize, String, Vec<Corner>);
+
+/// Keys each image with a board by camera and time step; also counts those without.
+fn key_images(
+    images: Vec<(String, Vec<Corner>)>,
+    path: &Path,
+    target: &Target,
+    cameras: &[CameraSpec],
+    patterns: &BTreeMap<String, String>,
+) -> Result<(Vec<Keyed>, usize)> {
+    let n = target.num_corners();
+    let compiled = compile_patterns(path, cameras, patterns)?;
+    let mut without_board = 0;
+    let mut keyed: Vec<Keyed> = Vec::new();
+    let mut keys_seen = BTreeSet::new();
+    for (file, corners) in images {
+        let first_line = corners[0].line;
+        let err = |message: String| data_err(path, first_line, message);
+        if corners.len() == 1 && corners[0].xy.is_none() {
+            without_board += 1;
+            continue;
+        }
+        if corners.len() != n {
+            return Err(err(format!(
+                "`{file}` has {} corner rows; a {} × {} board has {n}",
+                corners.len(),
+                target.rows,
+                target.cols
+            )));
+        }
+        let (camera, key) = camera_of(&file, cameras, &compiled).ok_or_else(|| {
+            err(format!(
+                "`{file}` matches no pattern of data.camera_patterns"
+            ))
+        })?;
+        if !keys_seen.insert((camera, key.clone())) {
+            return Err(err(format!(
+                "`{file}` is a second image of camera {} at time step `{key}`",
+                cameras[camera].name
+            )));
+        }
+        keyed.push((camera, key, corners));
+    }
+    Ok((keyed, without_board))
+}
+
+/// The dataset of the keyed images, frames numbered in sorted order of their keys.
+fn assemble(
+    keyed: &[Keyed],
+    path: &Path,
+    target: Target,
+    cameras: Vec<CameraSpec>,
+) -> Result<Dataset> {
+    let keys: BTreeSet<&String> = keyed.iter().map(|(_, k, _)| k).collect();
+    let frame_of: BTreeMap<&String, i64> = keys
+        .into_iter()
+        .enumerate()
+        .map(|(i, k)| (k, i as i64))
+        .collect();
+    let mut rows = Vec::new();
+    let mut weights = Vec::new();
+    for (camera, key, corners) in keyed {
+        for (i, c) in corners.iter().enumerate() {
+            if let Some(uv) = c.xy {
+                rows.push((*camera, frame_of[key], i, uv));
+                weights.push(c.weight);
+            }
+        }
+    }
+    if rows.is_empty() {
+        return Err(data_err(path, 1, "no corner was found in any image".into()));
+    }
+    let mut dataset = Dataset::from_keyed(target, cameras, rows);
+    for (o, w) in dataset.observations.iter_mut().zip(weights) {
+        o.weight = w;
+    }
+    Ok(dataset)
+}
+
 /// Reads a `corners.vnl` (SPEC §5): one row per corner, `filename x y [level|weight]`,
 /// `-` for a corner not found, a single `filename - - -` row for an image without a
 /// board, corners in row-major order. Frames are numbered in sorted order of their
@@ -128,196 +392,11 @@ pub fn parse_corners_vnl(
     cameras: Vec<CameraSpec>,
     patterns: &BTreeMap<String, String>,
 ) -> Result<(Dataset, usize)> {
-    let err = |line: u64, message: String| Error::Data {
-        path: path.into(),
-        line,
-        message,
-    };
-    if bytes.contains(&0) {
-        return Err(err(
-            1,
-            "this is a binary file, not a corners.vnl table".into(),
-        ));
-    }
-    let text = std::str::from_utf8(bytes).map_err(|_| err(1, "not a UTF-8 text file".into()))?;
-    // Editors on Windows start UTF-8 files with a byte-order mark.
-    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-    if cameras.len() > 1 {
-        for c in &cameras {
-            if !patterns.contains_key(&c.name) {
-                return Err(Error::Invalid(format!(
-                    "{}: with several cameras, data.camera_patterns needs a pattern for `{}`",
-                    path.display(),
-                    c.name
-                )));
-            }
-        }
-    }
-    // Column positions from the vnlog legend, else filename x y [level].
-    let (mut fcol, mut xcol, mut ycol, mut level_col, mut weight_col) = (0, 1, 2, Some(3), None);
-    let mut images: Vec<(String, Vec<Corner>)> = Vec::new();
-    let mut seen_data = false;
-    for (i, raw) in text.lines().enumerate() {
-        let line = i as u64 + 1;
-        let trimmed = raw.trim();
-        if trimmed.is_empty() || trimmed.starts_with("##") {
-            continue;
-        }
-        if let Some(legend) = trimmed.strip_prefix('#') {
-            if seen_data {
-                continue;
-            }
-            let names: Vec<&str> = legend.split_whitespace().collect();
-            let find = |n: &str| names.iter().position(|&c| c == n);
-            match (find("filename"), find("x"), find("y")) {
-                (Some(f), Some(x), Some(y)) => {
-                    (fcol, xcol, ycol) = (f, x, y);
-                    level_col = find("level");
-                    weight_col = find("weight");
-                }
-                _ => {
-                    return Err(err(
-                        line,
-                        format!("legend `{trimmed}` lacks filename, x and y columns"),
-                    ))
-                }
-            }
-            continue;
-        }
-        seen_data = true;
-        let fields: Vec<&str> = trimmed.split_whitespace().collect();
-        let needed = fcol.max(xcol).max(ycol) + 1;
-        if fields.len() < needed {
-            return Err(err(
-                line,
-                format!(
-                    "expected at least {needed} columns (filename x y), found {}",
-                    fields.len()
-                ),
-            ));
-        }
-        let number = |s: &str, what: &str| -> Result<Option<f64>> {
-            if s == "-" {
-                return Ok(None);
-            }
-            let v: f64 = s.parse().map_err(|_| {
-                err(
-                    line,
-                    format!("{what} `{}` is not a number", crate::app::config::short(s)),
-                )
-            })?;
-            if !v.is_finite() {
-                return Err(err(line, format!("{what} is not finite ({v})")));
-            }
-            Ok(Some(v))
-        };
-        let x = number(fields[xcol], "x")?;
-        let y = number(fields[ycol], "y")?;
-        let mut weight = 1.0;
-        let mut present = x.is_some() && y.is_some();
-        if let Some(c) = level_col.filter(|&c| c < fields.len()) {
-            match number(fields[c], "level")? {
-                // mrgingham: noise doubles with each decimation level.
-                Some(l) if (0.0..=MAX_LEVEL).contains(&l) => weight = 0.5f64.powf(l),
-                Some(l) => return Err(err(line, format!("level {l} is outside 0..{MAX_LEVEL}"))),
-                None => present = false,
-            }
-        }
-        if let Some(c) = weight_col.filter(|&c| c < fields.len()) {
-            let (lo, hi) = WEIGHT_RANGE;
-            match number(fields[c], "weight")? {
-                Some(w) if (lo..=hi).contains(&w) => weight = w,
-                Some(w) if w > 0.0 => {
-                    return Err(err(line, format!("weight {w} is outside {lo}..{hi}")))
-                }
-                _ => present = false,
-            }
-        }
-        let file = fields[fcol].to_string();
-        let corner = Corner {
-            line,
-            xy: if present {
-                Some([x.unwrap_or(0.0), y.unwrap_or(0.0)])
-            } else {
-                None
-            },
-            weight,
-        };
-        match images.last_mut() {
-            Some((name, corners)) if *name == file => corners.push(corner),
-            _ => {
-                if images.iter().any(|(n, _)| *n == file) {
-                    return Err(err(
-                        line,
-                        format!("the rows of `{file}` are not contiguous"),
-                    ));
-                }
-                images.push((file, vec![corner]));
-            }
-        }
-    }
-    let n = target.num_corners();
-    let compiled = compile_patterns(path, &cameras, patterns)?;
-    let mut without_board = 0;
-    let mut keyed: Vec<(usize, String, Vec<Corner>)> = Vec::new();
-    let mut keys_seen = BTreeSet::new();
-    for (file, corners) in images {
-        let first_line = corners[0].line;
-        if corners.len() == 1 && corners[0].xy.is_none() {
-            without_board += 1;
-            continue;
-        }
-        if corners.len() != n {
-            return Err(err(
-                first_line,
-                format!(
-                    "`{file}` has {} corner rows; a {} × {} board has {n}",
-                    corners.len(),
-                    target.rows,
-                    target.cols
-                ),
-            ));
-        }
-        let (camera, key) = camera_of(&file, &cameras, &compiled).ok_or_else(|| {
-            err(
-                first_line,
-                format!("`{file}` matches no pattern of data.camera_patterns"),
-            )
-        })?;
-        if !keys_seen.insert((camera, key.clone())) {
-            return Err(err(
-                first_line,
-                format!(
-                    "`{file}` is a second image of camera {} at time step `{key}`",
-                    cameras[camera].name
-                ),
-            ));
-        }
-        keyed.push((camera, key, corners));
-    }
-    let keys: BTreeSet<&String> = keyed.iter().map(|(_, k, _)| k).collect();
-    let frame_of: BTreeMap<&String, i64> = keys
-        .into_iter()
-        .enumerate()
-        .map(|(i, k)| (k, i as i64))
-        .collect();
-    let mut rows = Vec::new();
-    let mut weights = Vec::new();
-    for (camera, key, corners) in &keyed {
-        for (i, c) in corners.iter().enumerate() {
-            if let Some(uv) = c.xy {
-                rows.push((*camera, frame_of[key], i, uv));
-                weights.push(c.weight);
-            }
-        }
-    }
-    if rows.is_empty() {
-        return Err(err(1, "no corner was found in any image".into()));
-    }
-    let mut dataset = Dataset::from_keyed(target, cameras, rows);
-    for (o, w) in dataset.observations.iter_mut().zip(weights) {
-        o.weight = w;
-    }
+    let text = table_text(bytes, path)?;
+    check_patterns_cover(path, &cameras, patterns)?;
+    let images = group_rows(text, path)?;
+    let (keyed, without_board) = key_images(images, path, &target, &cameras, patterns)?;
+    let dataset = assemble(&keyed, path, target, cameras)?;
     Ok((dataset, without_board))
 }
 

@@ -14,26 +14,27 @@ pub fn read(path: &Path, target: Target, cameras: Vec<CameraSpec>) -> Result<Dat
     parse(&bytes, path, target, cameras)
 }
 
-/// Parses observations CSV bytes; `path` names the source in messages.
-pub fn parse(
-    bytes: &[u8],
-    path: &Path,
-    target: Target,
-    cameras: Vec<CameraSpec>,
-) -> Result<Dataset> {
-    let err = |line: u64, message: String| Error::Data {
+/// A data error at `line` of the file at `path`.
+fn data_err(path: &Path, line: u64, message: String) -> Error {
+    Error::Data {
         path: path.into(),
         line,
         message,
-    };
+    }
+}
+
+/// A CSV reader past a checked header; refuses empty and binary input.
+fn open_reader<'a>(bytes: &'a [u8], path: &Path) -> Result<csv::Reader<&'a [u8]>> {
     if bytes.is_empty() {
-        return Err(err(
+        return Err(data_err(
+            path,
             1,
             "the file is empty; expected the header camera,frame,corner,u,v".into(),
         ));
     }
     if bytes.contains(&0) {
-        return Err(err(
+        return Err(data_err(
+            path,
             1,
             "this is a binary file, not an observations CSV".into(),
         ));
@@ -47,9 +48,10 @@ pub fn parse(
         .from_reader(bytes);
     let header = reader
         .headers()
-        .map_err(|e| err(1, format!("unreadable header: {e}")))?;
+        .map_err(|e| data_err(path, 1, format!("unreadable header: {e}")))?;
     if header.iter().collect::<Vec<_>>() != HEADER {
-        return Err(err(
+        return Err(data_err(
+            path,
             1,
             format!(
                 "bad header `{}`; expected `{}`",
@@ -58,11 +60,91 @@ pub fn parse(
             ),
         ));
     }
-    let names: HashMap<&str, usize> = cameras
-        .iter()
-        .enumerate()
-        .map(|(i, c)| (c.name.as_str(), i))
-        .collect();
+    Ok(reader)
+}
+
+/// One observation row: camera, frame, corner and pixel.
+type Keyed = (usize, i64, usize, [f64; 2]);
+
+/// What one record is checked against.
+struct RowContext<'a> {
+    path: &'a Path,
+    target: &'a Target,
+    cameras: &'a [CameraSpec],
+    names: HashMap<&'a str, usize>,
+}
+
+impl RowContext<'_> {
+    /// Parses and checks one record (not yet for duplicates) at `line`.
+    fn parse_record(&self, record: &csv::StringRecord, line: u64) -> Result<Keyed> {
+        let err = |message: String| data_err(self.path, line, message);
+        if record.len() != HEADER.len() {
+            return Err(err(format!(
+                "expected 5 fields (camera,frame,corner,u,v), found {}",
+                record.len()
+            )));
+        }
+        let camera = *self.names.get(&record[0]).ok_or_else(|| {
+            err(format!(
+                "unknown camera `{}` (the config names: {})",
+                short(&record[0]),
+                self.cameras
+                    .iter()
+                    .map(|c| c.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ))
+        })?;
+        let frame: i64 = record[1]
+            .parse()
+            .map_err(|_| err(format!("frame `{}` is not an integer", short(&record[1]))))?;
+        let corner: usize = record[2].parse().map_err(|_| {
+            err(format!(
+                "corner `{}` is not a non-negative integer",
+                short(&record[2])
+            ))
+        })?;
+        let target = self.target;
+        if corner >= target.num_corners() {
+            return Err(err(format!(
+                "corner {corner} is outside the {} × {} board (0..{})",
+                target.rows,
+                target.cols,
+                target.num_corners() - 1
+            )));
+        }
+        let mut uv = [0.0; 2];
+        for (k, name) in [(3, "u"), (4, "v")] {
+            let v: f64 = record[k]
+                .parse()
+                .map_err(|_| err(format!("{name} `{}` is not a number", short(&record[k]))))?;
+            if !v.is_finite() {
+                return Err(err(format!("{name} is not finite ({v})")));
+            }
+            uv[k - 3] = v;
+        }
+        Ok((camera, frame, corner, uv))
+    }
+}
+
+/// Parses observations CSV bytes; `path` names the source in messages.
+pub fn parse(
+    bytes: &[u8],
+    path: &Path,
+    target: Target,
+    cameras: Vec<CameraSpec>,
+) -> Result<Dataset> {
+    let mut reader = open_reader(bytes, path)?;
+    let context = RowContext {
+        path,
+        target: &target,
+        cameras: &cameras,
+        names: cameras
+            .iter()
+            .enumerate()
+            .map(|(i, c)| (c.name.as_str(), i))
+            .collect(),
+    };
     let mut seen = HashSet::new();
     let mut rows = Vec::new();
     let mut record = csv::StringRecord::new();
@@ -71,73 +153,13 @@ pub fn parse(
         match reader.read_record(&mut record) {
             Ok(false) => break,
             Ok(true) => {}
-            Err(e) => return Err(err(line, format!("unreadable CSV record: {e}"))),
+            Err(e) => return Err(data_err(path, line, format!("unreadable CSV record: {e}"))),
         }
         let line = record.position().map(|p| p.line()).unwrap_or(line);
-        if record.len() != HEADER.len() {
-            return Err(err(
-                line,
-                format!(
-                    "expected 5 fields (camera,frame,corner,u,v), found {}",
-                    record.len()
-                ),
-            ));
-        }
-        let camera = *names.get(&record[0]).ok_or_else(|| {
-            err(
-                line,
-                format!(
-                    "unknown camera `{}` (the config names: {})",
-                    short(&record[0]),
-                    cameras
-                        .iter()
-                        .map(|c| c.name.as_str())
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
-            )
-        })?;
-        let frame: i64 = record[1].parse().map_err(|_| {
-            err(
-                line,
-                format!("frame `{}` is not an integer", short(&record[1])),
-            )
-        })?;
-        let corner: usize = record[2].parse().map_err(|_| {
-            err(
-                line,
-                format!(
-                    "corner `{}` is not a non-negative integer",
-                    short(&record[2])
-                ),
-            )
-        })?;
-        if corner >= target.num_corners() {
-            return Err(err(
-                line,
-                format!(
-                    "corner {corner} is outside the {} × {} board (0..{})",
-                    target.rows,
-                    target.cols,
-                    target.num_corners() - 1
-                ),
-            ));
-        }
-        let mut uv = [0.0; 2];
-        for (k, name) in [(3, "u"), (4, "v")] {
-            let v: f64 = record[k].parse().map_err(|_| {
-                err(
-                    line,
-                    format!("{name} `{}` is not a number", short(&record[k])),
-                )
-            })?;
-            if !v.is_finite() {
-                return Err(err(line, format!("{name} is not finite ({v})")));
-            }
-            uv[k - 3] = v;
-        }
+        let (camera, frame, corner, uv) = context.parse_record(&record, line)?;
         if !seen.insert((camera, frame, corner)) {
-            return Err(err(
+            return Err(data_err(
+                path,
                 line,
                 format!(
                     "duplicate observation of camera {}, frame {frame}, corner {corner}",
@@ -148,7 +170,11 @@ pub fn parse(
         rows.push((camera, frame, corner, uv));
     }
     if rows.is_empty() {
-        return Err(err(1, "the file has a header but no observations".into()));
+        return Err(data_err(
+            path,
+            1,
+            "the file has a header but no observations".into(),
+        ));
     }
     Ok(Dataset::from_keyed(target, cameras, rows))
 }

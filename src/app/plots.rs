@@ -53,6 +53,29 @@ fn value_range(series: &[Series], lines: &[HLine]) -> (f64, f64) {
     (lo - pad, hi + pad)
 }
 
+/// The category named at axis position `x`: only whole positions carry a name.
+fn category_label(cats: &[String], x: f64) -> String {
+    let i = x.round();
+    if (x - i).abs() < 1e-6 && i >= 0.0 && (i as usize) < cats.len() {
+        cats[i as usize].clone()
+    } else {
+        String::new()
+    }
+}
+
+/// One series' finite values as points, offset and jittered within its strip.
+fn strip_points(s: &Series, offset: f64, width: f64) -> Vec<(f64, f64)> {
+    let mut points = Vec::new();
+    for (ci, g) in s.groups.iter().enumerate() {
+        for (k, &v) in g.iter().enumerate().filter(|(_, v)| v.is_finite()) {
+            // Deterministic jitter from the golden ratio sequence.
+            let jitter = ((k as f64 * 0.618_033_988_75).fract() - 0.5) * width * 0.6;
+            points.push((ci as f64 + offset + jitter, v));
+        }
+    }
+    points
+}
+
 /// Draws one strip chart (points per category and series, mean ± std bars) on `area`.
 pub fn strip_chart<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
@@ -76,28 +99,14 @@ pub fn strip_chart<DB: DrawingBackend>(
         .configure_mesh()
         .disable_x_mesh()
         .x_labels(categories.len() + 1)
-        .x_label_formatter(&move |x| {
-            let i = x.round();
-            if (x - i).abs() < 1e-6 && i >= 0.0 && (i as usize) < cats.len() {
-                cats[i as usize].clone()
-            } else {
-                String::new()
-            }
-        })
+        .x_label_formatter(&move |x| category_label(&cats, *x))
         .y_desc(y_label)
         .draw()
         .map_err(|e| format!("{e:?}"))?;
     let width = 0.7 / series.len().max(1) as f64;
     for (si, s) in series.iter().enumerate() {
         let offset = (si as f64 + 0.5) * width - 0.35;
-        let mut points = Vec::new();
-        for (ci, g) in s.groups.iter().enumerate() {
-            for (k, &v) in g.iter().enumerate().filter(|(_, v)| v.is_finite()) {
-                // Deterministic jitter from the golden ratio sequence.
-                let jitter = ((k as f64 * 0.618_033_988_75).fract() - 0.5) * width * 0.6;
-                points.push((ci as f64 + offset + jitter, v));
-            }
-        }
+        let points = strip_points(s, offset, width);
         chart
             .draw_series(
                 points

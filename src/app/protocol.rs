@@ -334,6 +334,43 @@ pub fn test_rmse(
 }
 
 impl Setup {
+    /// Camera `k`'s results in `c`; a failed test error is recorded in the row's `error`.
+    fn camera_row(&self, c: &Calibration, k: usize, error: &mut Option<String>) -> CameraRow {
+        let cam = &self.header.cameras[k];
+        let theta = c.state.intrinsics[k];
+        let (w, h) = (cam.width, cam.height);
+        let against = |other: Option<&Intrinsics>| {
+            other.map_or((None, None), |o| {
+                (
+                    finite(mapping_error(o, &theta, w, h)),
+                    finite(mapping_error_rot(o, &theta, w, h)),
+                )
+            })
+        };
+        let (mapping, mapping_rot) =
+            against(self.reference.as_ref().map(|r| &r.state.intrinsics[k]));
+        let (truth, truth_rot) = against(self.truth.as_ref().map(|t| &t.intrinsics[k]));
+        let test = match &self.reference {
+            None => None,
+            Some(r) => match test_rmse(r, k, &theta, &self.settings) {
+                Ok(e) => finite(e),
+                Err(e) => {
+                    *error = Some(format!("test error of {}: {e}", cam.name));
+                    None
+                }
+            },
+        };
+        CameraRow {
+            intrinsics: theta,
+            pose: c.state.camera_poses[k],
+            test_rmse_px: test,
+            mapping_error_px: mapping,
+            mapping_error_rot_px: mapping_rot,
+            truth_mapping_error_px: truth,
+            truth_mapping_error_rot_px: truth_rot,
+        }
+    }
+
     /// Runs one subset × method task; failures become a row with the reason.
     pub fn task(&self, t: usize) -> Row {
         let methods = &self.header.methods;
@@ -371,39 +408,9 @@ impl Setup {
         row.converged = c.converged;
         row.iterations = c.iterations();
         row.rmse_px = Some(c.rmse_px);
-        for (k, cam) in self.header.cameras.iter().enumerate() {
-            let theta = c.state.intrinsics[k];
-            let (w, h) = (cam.width, cam.height);
-            let against = |other: Option<&Intrinsics>| {
-                other.map_or((None, None), |o| {
-                    (
-                        finite(mapping_error(o, &theta, w, h)),
-                        finite(mapping_error_rot(o, &theta, w, h)),
-                    )
-                })
-            };
-            let (mapping, mapping_rot) =
-                against(self.reference.as_ref().map(|r| &r.state.intrinsics[k]));
-            let (truth, truth_rot) = against(self.truth.as_ref().map(|t| &t.intrinsics[k]));
-            let test = match &self.reference {
-                None => None,
-                Some(r) => match test_rmse(r, k, &theta, &self.settings) {
-                    Ok(e) => finite(e),
-                    Err(e) => {
-                        row.error = Some(format!("test error of {}: {e}", cam.name));
-                        None
-                    }
-                },
-            };
-            row.cameras.push(CameraRow {
-                intrinsics: theta,
-                pose: c.state.camera_poses[k],
-                test_rmse_px: test,
-                mapping_error_px: mapping,
-                mapping_error_rot_px: mapping_rot,
-                truth_mapping_error_px: truth,
-                truth_mapping_error_rot_px: truth_rot,
-            });
+        for k in 0..self.header.cameras.len() {
+            let camera = self.camera_row(&c, k, &mut row.error);
+            row.cameras.push(camera);
         }
         if method.has_paraboloid() {
             row.deformations = c.state.deformations.clone();

@@ -230,20 +230,40 @@ fn camera_groups(header: &Header, rows: &[Row], k: usize, get: CameraGetter) -> 
     })
 }
 
-/// The report's markdown for one dataset; `prefix` is prepended to plot links.
-pub fn report_markdown(summary: &Summary, rows: &[Row], prefix: &str) -> String {
-    let h = &summary.header;
-    let mut s = String::new();
-    let get = |m: Method, k: &str| summary.methods.get(m.name()).and_then(|x| x.metrics.get(k));
-    let several = h.cameras.len() > 1;
-    // "method" or "method, camera" labels for per-camera table rows.
-    let label = |m: Method, k: usize| {
-        if several {
-            format!("{m}, {}", h.cameras[k].name)
-        } else {
-            m.to_string()
-        }
-    };
+/// A method's statistic of one summary key, if any subset produced it.
+fn stat<'a>(summary: &'a Summary, m: Method, key: &str) -> Option<&'a Stat> {
+    summary
+        .methods
+        .get(m.name())
+        .and_then(|x| x.metrics.get(key))
+}
+
+/// "method" or "method, camera" labels for per-camera table rows.
+fn row_label(h: &Header, m: Method, k: usize) -> String {
+    if h.cameras.len() > 1 {
+        format!("{m}, {}", h.cameras[k].name)
+    } else {
+        m.to_string()
+    }
+}
+
+/// One line per camera with its pinhole intrinsics.
+fn write_pinholes(s: &mut String, h: &Header, intrinsics: &[crate::model::lens::Intrinsics]) {
+    for (k, i) in intrinsics.iter().enumerate() {
+        let _ = writeln!(
+            s,
+            "- {}: fx {:.2}, fy {:.2}, cx {:.2}, cy {:.2}",
+            h.cameras[k].name,
+            i.fx(),
+            i.fy(),
+            i.cx(),
+            i.cy()
+        );
+    }
+}
+
+/// The report's opening: the dataset, the protocol's sizes, the reference and the truth.
+fn write_intro(s: &mut String, h: &Header) {
     let _ = writeln!(s, "## Dataset `{}`\n", h.dataset);
     let cams: Vec<String> = h
         .cameras
@@ -268,40 +288,25 @@ pub fn report_markdown(summary: &Summary, rows: &[Row], prefix: &str) -> String 
                 " (did not converge)"
             }
         );
-        for (k, i) in r.intrinsics.iter().enumerate() {
-            let _ = writeln!(
-                s,
-                "- {}: fx {:.2}, fy {:.2}, cx {:.2}, cy {:.2}",
-                h.cameras[k].name,
-                i.fx(),
-                i.fy(),
-                i.cx(),
-                i.cy()
-            );
-        }
+        write_pinholes(s, h, &r.intrinsics);
         s.push('\n');
     }
     if let Some(t) = &h.truth {
         let _ = writeln!(s, "Ground truth (synthetic):");
-        for (k, i) in t.iter().enumerate() {
-            let _ = writeln!(
-                s,
-                "- {}: fx {:.2}, fy {:.2}, cx {:.2}, cy {:.2}",
-                h.cameras[k].name,
-                i.fx(),
-                i.fy(),
-                i.cx(),
-                i.cy()
-            );
-        }
+        write_pinholes(s, h, t);
         s.push('\n');
     }
+}
+
+/// The train and test error table (paper Fig. 3a).
+fn write_rmse_table(s: &mut String, summary: &Summary, prefix: &str) {
+    let h = &summary.header;
     let _ = writeln!(s, "### Train and test error (paper Fig. 3a)\n");
     let test_heads: Vec<String> = h
         .cameras
         .iter()
         .map(|c| {
-            if several {
+            if h.cameras.len() > 1 {
                 format!("test RMSE {} (px)", c.name)
             } else {
                 "test RMSE (px)".into()
@@ -317,88 +322,120 @@ pub fn report_markdown(summary: &Summary, rows: &[Row], prefix: &str) -> String 
     for &m in &h.methods {
         let ms = &summary.methods[m.name()];
         let tests: Vec<String> = (0..h.cameras.len())
-            .map(|k| pm(get(m, &camera_key(h, k, "test_rmse_px")), 1.0, 4))
+            .map(|k| pm(stat(summary, m, &camera_key(h, k, "test_rmse_px")), 1.0, 4))
             .collect();
         let _ = writeln!(
             s,
             "| {m} | {} ({}) | {} | {} |",
             ms.calibrations,
             ms.failed,
-            pm(get(m, "rmse_px"), 1.0, 4),
+            pm(stat(summary, m, "rmse_px"), 1.0, 4),
             tests.join(" | ")
         );
     }
     let _ = writeln!(s, "\n![train and test RMSE]({prefix}rmse.svg)\n");
+}
+
+/// Rows of a per-camera × method table of `metrics`, with `digits` decimals.
+fn write_camera_rows(s: &mut String, summary: &Summary, metrics: &[&str], digits: usize) {
+    let h = &summary.header;
+    for k in 0..h.cameras.len() {
+        for &m in &h.methods {
+            let v: Vec<String> = metrics
+                .iter()
+                .map(|n| pm(stat(summary, m, &camera_key(h, k, n)), 1.0, digits))
+                .collect();
+            let _ = writeln!(s, "| {} | {} |", row_label(h, m, k), v.join(" | "));
+        }
+    }
+}
+
+/// The intrinsics (paper Fig. 4a) and mapping error (paper Fig. 4b) tables.
+fn write_intrinsics_and_mapping(s: &mut String, summary: &Summary, prefix: &str) {
     let _ = writeln!(s, "### Intrinsics (paper Fig. 4a)\n");
     let _ = writeln!(
         s,
         "| method | fx (px) | fy (px) | cx (px) | cy (px) |\n|---|---|---|---|---|"
     );
-    for k in 0..h.cameras.len() {
-        for &m in &h.methods {
-            let v: Vec<String> = ["fx", "fy", "cx", "cy"]
-                .iter()
-                .map(|n| pm(get(m, &camera_key(h, k, n)), 1.0, 2))
-                .collect();
-            let _ = writeln!(s, "| {} | {} |", label(m, k), v.join(" | "));
-        }
-    }
+    write_camera_rows(s, summary, &["fx", "fy", "cx", "cy"], 2);
     let _ = writeln!(s, "\n![fx and cx]({prefix}intrinsics.svg)\n");
     let _ = writeln!(s, "### Mapping error (paper Fig. 4b)\n");
     let _ = writeln!(
         s,
         "| method | to reference (px) | to reference, rotation removed (px) | to truth (px) | to truth, rotation removed (px) |\n|---|---|---|---|---|"
     );
-    for k in 0..h.cameras.len() {
-        for &m in &h.methods {
-            let v: Vec<String> = [
-                "mapping_error_px",
-                "mapping_error_rot_px",
-                "truth_mapping_error_px",
-                "truth_mapping_error_rot_px",
-            ]
-            .iter()
-            .map(|n| pm(get(m, &camera_key(h, k, n)), 1.0, 3))
-            .collect();
-            let _ = writeln!(s, "| {} | {} |", label(m, k), v.join(" | "));
-        }
-    }
+    write_camera_rows(
+        s,
+        summary,
+        &[
+            "mapping_error_px",
+            "mapping_error_rot_px",
+            "truth_mapping_error_px",
+            "truth_mapping_error_rot_px",
+        ],
+        3,
+    );
     let _ = writeln!(s, "\n![mapping error]({prefix}mapping.svg)\n");
-    let bending: Vec<Method> = h
+}
+
+/// The out-of-plane deformation table (paper Table S2) and Fig. 1's plot, if any method bends.
+fn write_bending(s: &mut String, summary: &Summary, rows: &[Row], prefix: &str) {
+    let bending: Vec<Method> = summary
+        .header
         .methods
         .iter()
         .copied()
         .filter(|m| m.has_paraboloid())
         .collect();
-    if !bending.is_empty() {
+    if bending.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        s,
+        "### Maximum out-of-plane deformation per image (paper Table S2)\n"
+    );
+    let _ = writeln!(s, "| method | max out-of-plane (mm) |\n|---|---|");
+    for m in bending {
         let _ = writeln!(
             s,
-            "### Maximum out-of-plane deformation per image (paper Table S2)\n"
+            "| {m} | {} |",
+            pm(stat(summary, m, "max_out_of_plane_m"), 1e3, 3)
         );
-        let _ = writeln!(s, "| method | max out-of-plane (mm) |\n|---|---|");
-        for m in bending {
-            let _ = writeln!(s, "| {m} | {} |", pm(get(m, "max_out_of_plane_m"), 1e3, 3));
-        }
-        if let Some((r, j)) = most_bent(rows) {
-            let _ = writeln!(
-                s,
-                "\n![deformation of one image]({prefix}deformation.svg)\n\nThe estimated bend of frame {} in subset {} (`{}`), the most bent image of the first subset (paper Fig. 1).\n",
-                r.frames[j], r.subset, r.method
-            );
-        }
     }
+    if let Some((r, j)) = most_bent(rows) {
+        let _ = writeln!(
+            s,
+            "\n![deformation of one image]({prefix}deformation.svg)\n\nThe estimated bend of frame {} in subset {} (`{}`), the most bent image of the first subset (paper Fig. 1).\n",
+            r.frames[j], r.subset, r.method
+        );
+    }
+}
+
+/// The failed calibrations and their reasons, if any.
+fn write_failed(s: &mut String, rows: &[Row]) {
     let failed: Vec<&Row> = rows.iter().filter(|r| !r.ok()).collect();
-    if !failed.is_empty() {
-        let _ = writeln!(
-            s,
-            "### Failed calibrations\n\n| subset | method | reason |\n|---|---|---|"
-        );
-        for r in failed {
-            let reason = r.error.as_deref().unwrap_or("").replace('|', "/");
-            let _ = writeln!(s, "| {} | {} | {reason} |", r.subset, r.method);
-        }
-        s.push('\n');
+    if failed.is_empty() {
+        return;
     }
+    let _ = writeln!(
+        s,
+        "### Failed calibrations\n\n| subset | method | reason |\n|---|---|---|"
+    );
+    for r in failed {
+        let reason = r.error.as_deref().unwrap_or("").replace('|', "/");
+        let _ = writeln!(s, "| {} | {} | {reason} |", r.subset, r.method);
+    }
+    s.push('\n');
+}
+
+/// The report's markdown for one dataset; `prefix` is prepended to plot links.
+pub fn report_markdown(summary: &Summary, rows: &[Row], prefix: &str) -> String {
+    let mut s = String::new();
+    write_intro(&mut s, &summary.header);
+    write_rmse_table(&mut s, summary, prefix);
+    write_intrinsics_and_mapping(&mut s, summary, prefix);
+    write_bending(&mut s, summary, rows, prefix);
+    write_failed(&mut s, rows);
     s
 }
 
@@ -416,21 +453,24 @@ fn most_bent(rows: &[Row]) -> Option<(&Row, usize)> {
     Some((r, j))
 }
 
-/// Writes the SVG plots of one dataset into `dir`.
-pub fn write_plots(dir: &Path, summary: &Summary, rows: &[Row]) -> Result<()> {
-    let h = &summary.header;
-    let cats: Vec<String> = h.methods.iter().map(|m| m.name().to_string()).collect();
-    let several = h.cameras.len() > 1;
-    let named = |base: &str, k: usize| {
-        if several {
-            format!("{base} {}", h.cameras[k].name)
-        } else {
-            base.to_string()
-        }
-    };
-    let colour = |i: usize| PALETTE[i % PALETTE.len()];
+/// A series label, with the camera's name when there are several cameras.
+fn named(h: &Header, base: &str, k: usize) -> String {
+    if h.cameras.len() > 1 {
+        format!("{base} {}", h.cameras[k].name)
+    } else {
+        base.to_string()
+    }
+}
+
+/// The `i`-th series colour, cycling through the palette.
+fn colour(i: usize) -> plotters::style::RGBColor {
+    PALETTE[i % PALETTE.len()]
+}
+
+/// `rmse.svg`: train RMSE and each camera's test RMSE per method.
+fn plot_rmse(dir: &Path, h: &Header, cats: &[String], rows: &[Row]) -> Result<()> {
     // Series names must outlive the charts.
-    let test_names: Vec<String> = (0..h.cameras.len()).map(|k| named("test", k)).collect();
+    let test_names: Vec<String> = (0..h.cameras.len()).map(|k| named(h, "test", k)).collect();
     let mut rmse = vec![Series {
         name: "train",
         color: colour(0),
@@ -447,12 +487,14 @@ pub fn write_plots(dir: &Path, summary: &Summary, rows: &[Row]) -> Result<()> {
         &dir.join("rmse.svg"),
         &format!("{}: train and test RMSE", h.dataset),
         "RMSE (px)",
-        &cats,
+        cats,
         &rmse,
         &[],
-    )?;
+    )
+}
 
-    // Intrinsics of camera 0, with the reference and the truth.
+/// `intrinsics.svg`: fx and cx of camera 0, with the reference and the truth.
+fn plot_intrinsics(dir: &Path, h: &Header, cats: &[String], rows: &[Row]) -> Result<()> {
     let lines = |f: fn(&crate::model::lens::Intrinsics) -> f64| {
         let mut lines = Vec::new();
         if let Some(r) = &h.reference {
@@ -471,7 +513,7 @@ pub fn write_plots(dir: &Path, summary: &Summary, rows: &[Row]) -> Result<()> {
         }
         lines
     };
-    let (fx_name, cx_name) = (named("fx", 0), named("cx", 0));
+    let (fx_name, cx_name) = (named(h, "fx", 0), named(h, "cx", 0));
     plots::panels_svg(
         &dir.join("intrinsics.svg"),
         &[
@@ -496,21 +538,24 @@ pub fn write_plots(dir: &Path, summary: &Summary, rows: &[Row]) -> Result<()> {
                 lines(|k| k.cx()),
             ),
         ],
-        &cats,
-    )?;
+        cats,
+    )
+}
 
+/// `mapping.svg`: each camera's mapping error to the reference and to the truth.
+fn plot_mapping(dir: &Path, h: &Header, cats: &[String], rows: &[Row]) -> Result<()> {
     let mut names = Vec::new();
     for k in 0..h.cameras.len() {
         if h.reference.is_some() {
             names.push((
-                named("to reference", k),
+                named(h, "to reference", k),
                 k,
                 (|c| c.mapping_error_px) as CameraGetter,
             ));
         }
         if h.truth.is_some() {
-            names.push((named("to truth", k), k, |c| c.truth_mapping_error_px));
-            names.push((named("to truth, rotation removed", k), k, |c| {
+            names.push((named(h, "to truth", k), k, |c| c.truth_mapping_error_px));
+            names.push((named(h, "to truth, rotation removed", k), k, |c| {
                 c.truth_mapping_error_rot_px
             }));
         }
@@ -528,10 +573,19 @@ pub fn write_plots(dir: &Path, summary: &Summary, rows: &[Row]) -> Result<()> {
         &dir.join("mapping.svg"),
         &format!("{}: mapping error", h.dataset),
         "mapping error (px)",
-        &cats,
+        cats,
         &mapping,
         &[],
-    )?;
+    )
+}
+
+/// Writes the SVG plots of one dataset into `dir`.
+pub fn write_plots(dir: &Path, summary: &Summary, rows: &[Row]) -> Result<()> {
+    let h = &summary.header;
+    let cats: Vec<String> = h.methods.iter().map(|m| m.name().to_string()).collect();
+    plot_rmse(dir, h, &cats, rows)?;
+    plot_intrinsics(dir, h, &cats, rows)?;
+    plot_mapping(dir, h, &cats, rows)?;
     if let Some((r, j)) = most_bent(rows) {
         plots::deformation_svg(
             &dir.join("deformation.svg"),

@@ -31,6 +31,18 @@ pub fn summary(c: &Calibration) -> String {
         c.rejected.len(),
         c.settings.outlier_k
     );
+    write_cameras(&mut s, c);
+    write_rig(&mut s, c);
+    write_board(&mut s, c);
+    for w in &c.warnings {
+        let _ = writeln!(s, "  warning: {w}");
+    }
+    s
+}
+
+/// One line per camera: its size, lens model and intrinsics.
+fn write_cameras(s: &mut String, c: &Calibration) {
+    let d = &c.dataset;
     for (k, cam) in d.cameras.iter().enumerate() {
         let i = c.state.intrinsics[k];
         let values: Vec<String> = i
@@ -55,6 +67,11 @@ pub fn summary(c: &Calibration) -> String {
             values.join("  ")
         );
     }
+}
+
+/// One line per camera after the first: its baseline and rotation from camera 0.
+fn write_rig(s: &mut String, c: &Calibration) {
+    let d = &c.dataset;
     for (k, cam) in d.cameras.iter().enumerate().skip(1) {
         let pose = c.state.camera_poses[k];
         // The baseline is the distance between the optical centres.
@@ -68,6 +85,10 @@ pub fn summary(c: &Calibration) -> String {
             pose.rotation_matrix().angle().to_degrees()
         );
     }
+}
+
+/// The board's bend and static correction, for the methods that estimate them.
+fn write_board(s: &mut String, c: &Calibration) {
     if c.method.has_paraboloid() {
         let _ = writeln!(
             s,
@@ -89,8 +110,4 @@ pub fn summary(c: &Calibration) -> String {
             c.gauge
         );
     }
-    for w in &c.warnings {
-        let _ = writeln!(s, "  warning: {w}");
-    }
-    s
 }

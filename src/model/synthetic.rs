@@ -415,6 +415,54 @@ impl Generator {
         }
     }
 
+    /// The board's static deviation from the nominal grid per corner (print noise, sheet offset).
+    fn print_errors(&self, rng: &mut ChaCha8Rng) -> Vec<[f64; 3]> {
+        let s = &self.spec;
+        let target = s.target;
+        let print = self.print_scale;
+        let nxy = Normal::new(0.0, s.print_sigma_xy_m).expect("sigma is non-negative");
+        let nz = Normal::new(0.0, s.print_sigma_z_m).expect("sigma is non-negative");
+        (0..target.num_corners())
+            .map(|i| {
+                let right_sheet = i % target.cols >= target.cols / 2;
+                let off = if right_sheet {
+                    s.sheet_offset_m
+                } else {
+                    [0.0, 0.0]
+                };
+                [
+                    print * (nxy.sample(rng) + off[0]),
+                    print * (nxy.sample(rng) + off[1]),
+                    print * nz.sample(rng),
+                ]
+            })
+            .collect()
+    }
+
+    /// The noiseless pixels of frame `j`'s corners that fall inside each camera's image.
+    fn project_views(
+        &self,
+        cameras: &[CameraSpec],
+        truth: &Truth,
+        j: usize,
+    ) -> Vec<Vec<(usize, Vector2<f64>)>> {
+        let pose = truth.frame_poses[j];
+        (0..self.rig.len())
+            .map(|k| {
+                let (w, h) = (cameras[k].width as f64, cameras[k].height as f64);
+                let camera_pose = self.rig[k].compose(&pose);
+                (0..truth.target.num_corners())
+                    .filter_map(|i| {
+                        let uv = self.intrinsics[k]
+                            .project(&camera_pose.transform(&truth.board_point(i, j)))?;
+                        (uv.x >= 0.0 && uv.x <= w - 1.0 && uv.y >= 0.0 && uv.y <= h - 1.0)
+                            .then_some((i, uv))
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
     /// Generates the dataset and its truth.
     pub fn generate(&self) -> (Dataset, Truth) {
         let mut rng = ChaCha8Rng::seed_from_u64(self.seed);
@@ -424,24 +472,7 @@ impl Generator {
         for (c, k) in cameras.iter_mut().zip(&self.intrinsics) {
             c.model = k.model();
         }
-        let print = self.print_scale;
-        let nxy = Normal::new(0.0, s.print_sigma_xy_m).expect("sigma is non-negative");
-        let nz = Normal::new(0.0, s.print_sigma_z_m).expect("sigma is non-negative");
-        let corrections: Vec<[f64; 3]> = (0..target.num_corners())
-            .map(|i| {
-                let right_sheet = i % target.cols >= target.cols / 2;
-                let off = if right_sheet {
-                    s.sheet_offset_m
-                } else {
-                    [0.0, 0.0]
-                };
-                [
-                    print * (nxy.sample(&mut rng) + off[0]),
-                    print * (nxy.sample(&mut rng) + off[1]),
-                    print * nz.sample(&mut rng),
-                ]
-            })
-            .collect();
+        let corrections = self.print_errors(&mut rng);
         let noise = Normal::new(0.0, self.noise_px).expect("noise is a non-negative number");
         let n = self.rig.len();
         let mut truth = Truth {
@@ -470,20 +501,7 @@ impl Generator {
             truth.deformations.push(bend);
             truth.frame_poses.push(pose);
             let j = truth.frame_poses.len() - 1;
-            let views: Vec<Vec<(usize, Vector2<f64>)>> = (0..n)
-                .map(|k| {
-                    let (w, h) = (cameras[k].width as f64, cameras[k].height as f64);
-                    let camera_pose = self.rig[k].compose(&pose);
-                    (0..target.num_corners())
-                        .filter_map(|i| {
-                            let uv = self.intrinsics[k]
-                                .project(&camera_pose.transform(&truth.board_point(i, j)))?;
-                            (uv.x >= 0.0 && uv.x <= w - 1.0 && uv.y >= 0.0 && uv.y <= h - 1.0)
-                                .then_some((i, uv))
-                        })
-                        .collect()
-                })
-                .collect();
+            let views = self.project_views(&cameras, &truth, j);
             if (views[anchor].len() as f64) < self.min_visible * corners {
                 truth.frame_poses.pop();
                 truth.deformations.pop();

@@ -25,29 +25,32 @@ pub struct Trust {
 
 /// Estimates the detector noise from the residuals of neighbouring corners.
 ///
-/// A model error bends the residual field smoothly across the board, so it nearly
-/// cancels in the difference of two adjacent corners' residuals, while the noise
-/// of the two adds: E‖r_i − r_j‖² ≈ 4σ² for the 2D residuals of neighbours i, j.
-/// So σ̂ comes from the data without assuming the model is right, which is what a
-/// bias test needs. `None` with no pair of neighbours.
+/// A model error bends the residual field smoothly across the board, so it
+/// nearly cancels in the second difference r_{i−1} − 2r_i + r_{i+1} of three
+/// adjacent corners (exactly, for an error linear across them), while their
+/// noise adds: E‖d‖² = 12σ² for the 2D residuals. So σ̂ comes from the data
+/// without assuming the model is right, which is what a bias test needs. Rows
+/// and columns of the board both give triples. `None` with no triple.
 pub fn noise_from_neighbours(dataset: &Dataset, residuals: &[f64]) -> Option<f64> {
     let cols = dataset.target.cols;
     let mut at: HashMap<(usize, usize, usize), [f64; 2]> = HashMap::new();
     for (o, r) in dataset.observations.iter().zip(residuals.chunks_exact(2)) {
         at.insert((o.camera, o.frame, o.corner), [r[0], r[1]]);
     }
-    let (mut sum, mut pairs) = (0.0, 0usize);
+    let (mut sum, mut triples) = (0.0, 0usize);
     for (&(camera, frame, corner), r) in &at {
-        let right = (corner % cols + 1 < cols).then_some(corner + 1);
-        let below = Some(corner + cols);
-        for n in [right, below].into_iter().flatten() {
-            if let Some(q) = at.get(&(camera, frame, n)) {
-                sum += (r[0] - q[0]).powi(2) + (r[1] - q[1]).powi(2);
-                pairs += 1;
+        let col = corner % cols;
+        // The corner as the middle of a horizontal and of a vertical triple.
+        let horizontal = (col >= 1 && col + 1 < cols).then(|| (corner - 1, corner + 1));
+        let vertical = (corner >= cols).then(|| (corner - cols, corner + cols));
+        for (a, b) in [horizontal, vertical].into_iter().flatten() {
+            if let (Some(p), Some(q)) = (at.get(&(camera, frame, a)), at.get(&(camera, frame, b))) {
+                sum += (p[0] - 2.0 * r[0] + q[0]).powi(2) + (p[1] - 2.0 * r[1] + q[1]).powi(2);
+                triples += 1;
             }
         }
     }
-    (pairs > 0).then(|| (sum / (4.0 * pairs as f64)).sqrt())
+    (triples > 0).then(|| (sum / (12.0 * triples as f64)).sqrt())
 }
 
 /// The figures for residuals (u, v per observation) of a fit with `parameters`

@@ -1,6 +1,7 @@
 //! The calibration pipeline: Zhang initialisation → `standard` → the chosen method.
 use crate::error::{Error, Result};
 use crate::model::board::Method;
+use crate::model::camera::CameraSpec;
 use crate::model::dataset::Dataset;
 use crate::model::lens::Intrinsics;
 use crate::model::pose::Pose;
@@ -304,6 +305,125 @@ fn coverage_warnings(dataset: &Dataset, warnings: &mut Vec<String>) {
     }
 }
 
+/// A camera's views with a homography, refused when fewer than a calibration needs.
+fn own_views(
+    dataset: &Dataset,
+    hs: &HashMap<View, Matrix3<f64>>,
+    k: usize,
+) -> Result<Vec<(usize, Matrix3<f64>)>> {
+    let own: Vec<(usize, Matrix3<f64>)> = (0..dataset.num_frames())
+        .filter_map(|j| hs.get(&(k, j)).map(|h| (j, *h)))
+        .collect();
+    if own.len() < MIN_IMAGES {
+        let what = format!(
+            "{} usable image(s); a calibration needs at least {MIN_IMAGES}",
+            own.len()
+        );
+        return Err(Error::Degenerate(if dataset.cameras.len() == 1 {
+            what
+        } else {
+            format!("camera {}: {what}", dataset.cameras[k].name)
+        }));
+    }
+    Ok(own)
+}
+
+/// A camera's initial intrinsics, board pose per frame, and whether Zhang fell back.
+type CameraInit = (Intrinsics, Vec<Option<Pose>>, bool);
+
+/// Initialises a fisheye camera by a focal-length search: Zhang assumes a pinhole.
+fn init_fisheye(dataset: &Dataset, k: usize, own: &[(usize, Matrix3<f64>)]) -> Result<CameraInit> {
+    let cam = &dataset.cameras[k];
+    let frames: Vec<usize> = own.iter().map(|(j, _)| *j).collect();
+    let template = Intrinsics::pinhole_of(cam.model, 1.0, 1.0, 0.0, 0.0);
+    let points = fisheye_init::views_of(dataset, k, &frames);
+    let (kk, poses) = fisheye_init::initialise(&template, cam.width, cam.height, &points)
+        .ok_or_else(|| {
+            Error::Init(format!(
+                "{}: no focal length of the `{}` model explains the board views",
+                cam.name, cam.model
+            ))
+        })?;
+    let mut views = vec![None; dataset.num_frames()];
+    for (j, pose) in frames.into_iter().zip(poses) {
+        views[j] = Some(pose);
+    }
+    check_orientations(&cam.name, views.iter().flatten())?;
+    Ok((kk, views, false))
+}
+
+/// Why Zhang's closed form found no focal length for a camera's homographies.
+fn no_focal_length(cam: &CameraSpec, list: &[Matrix3<f64>], e: impl std::fmt::Display) -> Error {
+    // Explain the usual cause: seen through a nominal lens, every view has
+    // the same orientation.
+    let size = cam.width.max(cam.height) as f64;
+    let nominal = Intrinsics::pinhole(size, size, cam.width as f64 / 2.0, cam.height as f64 / 2.0);
+    let poses: Vec<Pose> = list
+        .iter()
+        .filter_map(|h| zhang::pose_from_homography(h, &nominal))
+        .collect();
+    if let Err(parallel) = check_orientations(&cam.name, poses.iter()) {
+        return parallel;
+    }
+    // The views are not all parallel: say what else leaves no focal length.
+    Error::Degenerate(format!(
+        "no focal length fits the {} views of {}, though they are tilted: the board shows too little perspective \
+         (too small or too far away) or its corner numbering is inconsistent ({e})",
+        list.len(),
+        cam.name
+    ))
+}
+
+/// Initialises a pinhole-like camera by Zhang's closed form on its homographies.
+fn init_zhang(
+    dataset: &Dataset,
+    k: usize,
+    own: &[(usize, Matrix3<f64>)],
+    warnings: &mut Vec<String>,
+) -> Result<CameraInit> {
+    let cam = &dataset.cameras[k];
+    let list: Vec<Matrix3<f64>> = own.iter().map(|(_, h)| *h).collect();
+    let (kk, fallback) = zhang::initial_intrinsics(&list, cam.width, cam.height)
+        .map_err(|e| no_focal_length(cam, &list, e))?;
+    if fallback {
+        warnings.push(format!(
+            "{}: Zhang's closed form was ill-conditioned; started from a centred principal point",
+            cam.name
+        ));
+    }
+    let mut views = vec![None; dataset.num_frames()];
+    for &(j, h) in own {
+        views[j] = Some(zhang::pose_from_homography(&h, &kk).ok_or_else(|| {
+            Error::Init(format!(
+                "{}: no board pose fits its homography",
+                view_name(dataset, (k, j))
+            ))
+        })?);
+    }
+    check_orientations(&cam.name, views.iter().flatten())?;
+    // Zhang's pinhole, as the camera's model with no distortion.
+    let pinhole = Intrinsics::pinhole_of(cam.model, kk.fx(), kk.fy(), kk.cx(), kk.cy());
+    Ok((pinhole, views, fallback))
+}
+
+/// Π_j per frame, from the camera that sees most of the board, through the rig.
+fn frame_poses(dataset: &Dataset, views: &[Vec<Option<Pose>>], rig: &[Pose]) -> Vec<Pose> {
+    let cameras = dataset.cameras.len();
+    let mut counts = vec![vec![0usize; dataset.num_frames()]; cameras];
+    for o in &dataset.observations {
+        counts[o.camera][o.frame] += 1;
+    }
+    (0..dataset.num_frames())
+        .map(|j| {
+            let k = (0..cameras)
+                .filter(|&k| views[k][j].is_some())
+                .max_by_key(|&k| (counts[k][j], std::cmp::Reverse(k)))
+                .expect("every kept frame has a view");
+            rig[k].inverse().compose(&views[k][j].expect("chosen"))
+        })
+        .collect()
+}
+
 /// Zhang's initialisation: intrinsics per camera, π_k from the views cameras share,
 /// and one board pose per frame.
 fn initialise(dataset: &Dataset, warnings: &mut Vec<String>) -> Result<(Dataset, State, bool)> {
@@ -317,110 +437,76 @@ fn initialise(dataset: &Dataset, warnings: &mut Vec<String>) -> Result<(Dataset,
     let cameras = dataset.cameras.len();
     let mut intrinsics = Vec::with_capacity(cameras);
     let mut any_fallback = false;
-    let mut views: Vec<Vec<Option<Pose>>> = vec![vec![None; dataset.num_frames()]; cameras];
+    let mut views: Vec<Vec<Option<Pose>>> = Vec::with_capacity(cameras);
     for (k, cam) in dataset.cameras.iter().enumerate() {
-        let own: Vec<(usize, Matrix3<f64>)> = (0..dataset.num_frames())
-            .filter_map(|j| hs.get(&(k, j)).map(|h| (j, *h)))
-            .collect();
-        if own.len() < MIN_IMAGES {
-            let what = format!(
-                "{} usable image(s); a calibration needs at least {MIN_IMAGES}",
-                own.len()
-            );
-            return Err(Error::Degenerate(if cameras == 1 {
-                what
-            } else {
-                format!("camera {}: {what}", cam.name)
-            }));
-        }
-        if !cam.model.info().pinhole_like {
-            let frames: Vec<usize> = own.iter().map(|(j, _)| *j).collect();
-            let template = Intrinsics::pinhole_of(cam.model, 1.0, 1.0, 0.0, 0.0);
-            let points = fisheye_init::views_of(&dataset, k, &frames);
-            let (kk, poses) = fisheye_init::initialise(&template, cam.width, cam.height, &points)
-                .ok_or_else(|| {
-                Error::Init(format!(
-                    "{}: no focal length of the `{}` model explains the board views",
-                    cam.name, cam.model
-                ))
-            })?;
-            for (j, pose) in frames.into_iter().zip(poses) {
-                views[k][j] = Some(pose);
-            }
-            check_orientations(&cam.name, views[k].iter().flatten())?;
-            intrinsics.push(kk);
-            continue;
-        }
-        let list: Vec<Matrix3<f64>> = own.iter().map(|(_, h)| *h).collect();
-        let (kk, fallback) = match zhang::initial_intrinsics(&list, cam.width, cam.height) {
-            Ok(k) => k,
-            Err(e) => {
-                // Explain the usual cause: seen through a nominal lens, every view has
-                // the same orientation.
-                let size = cam.width.max(cam.height) as f64;
-                let nominal = Intrinsics::pinhole(
-                    size,
-                    size,
-                    cam.width as f64 / 2.0,
-                    cam.height as f64 / 2.0,
-                );
-                let poses: Vec<Pose> = list
-                    .iter()
-                    .filter_map(|h| zhang::pose_from_homography(h, &nominal))
-                    .collect();
-                check_orientations(&cam.name, poses.iter())?;
-                // The views are not all parallel: say what else leaves no focal length.
-                return Err(Error::Degenerate(format!(
-                    "no focal length fits the {} views of {}, though they are tilted: the board shows too little perspective \
-                     (too small or too far away) or its corner numbering is inconsistent ({e})",
-                    list.len(),
-                    cam.name
-                )));
-            }
+        let own = own_views(&dataset, &hs, k)?;
+        let (kk, poses, fallback) = if cam.model.info().pinhole_like {
+            init_zhang(&dataset, k, &own, warnings)?
+        } else {
+            init_fisheye(&dataset, k, &own)?
         };
-        if fallback {
-            any_fallback = true;
-            warnings.push(format!(
-                "{}: Zhang's closed form was ill-conditioned; started from a centred principal point",
-                cam.name
-            ));
-        }
-        for (j, h) in own {
-            views[k][j] = Some(zhang::pose_from_homography(&h, &kk).ok_or_else(|| {
-                Error::Init(format!(
-                    "{}: no board pose fits its homography",
-                    view_name(&dataset, (k, j))
-                ))
-            })?);
-        }
-        check_orientations(&cam.name, views[k].iter().flatten())?;
-        // Zhang's pinhole, as the camera's model with no distortion.
-        intrinsics.push(Intrinsics::pinhole_of(
-            cam.model,
-            kk.fx(),
-            kk.fy(),
-            kk.cx(),
-            kk.cy(),
-        ));
+        any_fallback |= fallback;
+        intrinsics.push(kk);
+        views.push(poses);
     }
     let names: Vec<String> = dataset.cameras.iter().map(|c| c.name.clone()).collect();
     let rig = crate::model::rig::initial_rig(&views, &names)?;
-    // Π_j from the camera that sees most of the board in frame j.
-    let mut counts = vec![vec![0usize; dataset.num_frames()]; cameras];
-    for o in &dataset.observations {
-        counts[o.camera][o.frame] += 1;
-    }
-    let poses: Vec<Pose> = (0..dataset.num_frames())
-        .map(|j| {
-            let k = (0..cameras)
-                .filter(|&k| views[k][j].is_some())
-                .max_by_key(|&k| (counts[k][j], std::cmp::Reverse(k)))
-                .expect("every kept frame has a view");
-            rig[k].inverse().compose(&views[k][j].expect("chosen"))
-        })
-        .collect();
+    let poses = frame_poses(&dataset, &views, &rig);
     let state = State::rigid(intrinsics, rig, poses, &dataset.target);
     Ok((dataset, state, any_fallback))
+}
+
+/// The settings of the `standard` stage.
+fn warm_start_settings(request: &Request) -> SolverSettings {
+    if request.method == Method::Standard {
+        request.settings.clone()
+    } else {
+        // A warm start only needs to be close: the final stage polishes it.
+        SolverSettings {
+            function_tolerance: request
+                .settings
+                .function_tolerance
+                .max(WARM_START_TOLERANCE),
+            parameter_tolerance: request
+                .settings
+                .parameter_tolerance
+                .max(WARM_START_TOLERANCE),
+            ..request.settings.clone()
+        }
+    }
+}
+
+/// Solves the requested (non-`standard`) method; returns its gauge, frozen corners, residuals.
+fn solve_method(
+    dataset: &Dataset,
+    state: &mut State,
+    request: &Request,
+    stages: &mut Vec<Stage>,
+    warnings: &mut Vec<String>,
+) -> Result<(Vec<usize>, Vec<usize>, Vec<f64>)> {
+    let gauge = choose_gauge(dataset, request.method, request.gauge.as_deref())?;
+    let frozen = if request.method.has_correction() {
+        underobserved_corners(dataset)
+    } else {
+        Vec::new()
+    };
+    if !frozen.is_empty() {
+        warnings.push(format!(
+            "{} corner(s) seen in fewer than two images keep a zero correction",
+            frozen.len()
+        ));
+    }
+    let problem = Problem {
+        dataset,
+        method: request.method,
+        gauge: gauge.clone(),
+        frozen: frozen.clone(),
+        hold: Hold::default(),
+    };
+    let report = problem.solve(state, &request.settings)?;
+    robust::check_stage(request.method, &report, true)?;
+    stages.push(Stage::new(request.method, &report));
+    Ok((gauge, frozen, report.residuals))
 }
 
 /// Runs the whole pipeline on one dataset.
@@ -441,52 +527,14 @@ pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {
         frozen: Vec::new(),
         hold: Hold::default(),
     };
-    // A warm start only needs to be close: the final stage polishes it.
-    let warm = if request.method == Method::Standard {
-        request.settings.clone()
-    } else {
-        SolverSettings {
-            function_tolerance: request
-                .settings
-                .function_tolerance
-                .max(WARM_START_TOLERANCE),
-            parameter_tolerance: request
-                .settings
-                .parameter_tolerance
-                .max(WARM_START_TOLERANCE),
-            ..request.settings.clone()
-        }
-    };
-    let report = standard.solve(&mut state, &warm)?;
+    let report = standard.solve(&mut state, &warm_start_settings(request))?;
     robust::check_stage(Method::Standard, &report, true)?;
     stages.push(Stage::new(Method::Standard, &report));
 
     let (gauge, frozen, residuals) = if request.method == Method::Standard {
         (Vec::new(), Vec::new(), report.residuals)
     } else {
-        let gauge = choose_gauge(&dataset, request.method, request.gauge.as_deref())?;
-        let frozen = if request.method.has_correction() {
-            underobserved_corners(&dataset)
-        } else {
-            Vec::new()
-        };
-        if !frozen.is_empty() {
-            warnings.push(format!(
-                "{} corner(s) seen in fewer than two images keep a zero correction",
-                frozen.len()
-            ));
-        }
-        let problem = Problem {
-            dataset: &dataset,
-            method: request.method,
-            gauge: gauge.clone(),
-            frozen: frozen.clone(),
-            hold: Hold::default(),
-        };
-        let report = problem.solve(&mut state, &request.settings)?;
-        robust::check_stage(request.method, &report, true)?;
-        stages.push(Stage::new(request.method, &report));
-        (gauge, frozen, report.residuals)
+        solve_method(&dataset, &mut state, request, &mut stages, &mut warnings)?
     };
     let (dataset, residuals, frozen, rejected) = finish_robustly(
         dataset,
