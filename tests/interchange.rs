@@ -404,12 +404,13 @@ fn exports_of_every_lens_model_project_like_us() {
         if mrcal.is_none() {
             expected.push(format!("{}.cameramodel", cam.name));
         }
-        assert_eq!(
-            written.warnings.len(),
-            expected.len(),
-            "{model}: {:?}",
-            written.warnings
-        );
+        // The ROS, Kalibr and COLMAP warnings are checked in tests/exports.rs.
+        let ours: Vec<&String> = written
+            .warnings
+            .iter()
+            .filter(|w| w.starts_with("opencv.yaml") || w.contains(".cameramodel"))
+            .collect();
+        assert_eq!(ours.len(), expected.len(), "{model}: {ours:?}");
         for file in &expected {
             assert!(
                 written

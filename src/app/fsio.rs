@@ -78,8 +78,15 @@ pub type Owns = Box<dyn Fn(&str) -> bool>;
 /// The files of one calibration (`calibration.json` and what goes with it).
 pub fn calibration_files() -> Owns {
     Box::new(|name| {
-        matches!(name, "calibration.json" | "opencv.yaml" | "outliers.csv")
-            || name.ends_with(".cameramodel")
+        matches!(
+            name,
+            "calibration.json"
+                | "opencv.yaml"
+                | "outliers.csv"
+                | crate::app::exports::KALIBR_FILE
+                | crate::app::exports::COLMAP_FILE
+        ) || name.ends_with(".cameramodel")
+            || name.ends_with(crate::app::exports::ROS_SUFFIX)
     })
 }
 

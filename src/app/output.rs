@@ -8,8 +8,8 @@ use crate::error::{Error, Result};
 use crate::solver::calibrate::Calibration;
 use std::path::{Path, PathBuf};
 
-/// Writes `calibration.json`, `opencv.yaml` and one `<camera>.cameramodel` per
-/// camera into `dir` (created if needed); returns the JSON's path.
+/// Writes `calibration.json`, its exports (see [`write_models`]) and
+/// `outliers.csv` into `dir` (created if needed); returns the JSON's path.
 pub fn write_calibration(dir: &Path, c: &Calibration) -> Result<Written> {
     let written = write_models(dir, &CalibrationJson::from(c))?;
     write_atomic(&dir.join("outliers.csv"), &suspects_csv(c)?)?;
@@ -44,8 +44,10 @@ pub fn suspects_csv(c: &Calibration) -> Result<Vec<u8>> {
         .map_err(|e| Error::write("outliers.csv", std::io::Error::other(e.to_string())))
 }
 
-/// Writes a calibration's JSON and its OpenCV and mrcal exports into `dir`;
-/// returns the JSON's path and a warning per export left out.
+/// Writes a calibration's JSON and its exports into `dir`: OpenCV, mrcal, ROS
+/// (`<camera>_camera_info.yaml`), Kalibr (`camchain.yaml`) and COLMAP
+/// (`cameras.txt`); returns the JSON's path and a warning per camera an export
+/// format cannot hold exactly (left out, never approximated).
 pub fn write_models(dir: &Path, json: &CalibrationJson) -> Result<Written> {
     let mut files = std::collections::BTreeMap::new();
     for cam in &json.cameras {
@@ -77,6 +79,15 @@ pub fn write_models(dir: &Path, json: &CalibrationJson) -> Result<Written> {
                 cam.model
             )),
         }
+    }
+    for (file, text) in exports::camera_infos(json, &mut warnings) {
+        write_atomic(&dir.join(file), text.as_bytes())?;
+    }
+    if let Some(yaml) = exports::camchain_yaml(json, &mut warnings) {
+        write_atomic(&dir.join(exports::KALIBR_FILE), yaml.as_bytes())?;
+    }
+    if let Some(txt) = exports::cameras_txt(json, &mut warnings) {
+        write_atomic(&dir.join(exports::COLMAP_FILE), txt.as_bytes())?;
     }
     let path = dir.join("calibration.json");
     write_atomic(&path, text.as_bytes())?;
