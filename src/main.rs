@@ -183,7 +183,8 @@ fn run_calibrate(args: CalibrateArgs) -> Result<()> {
         settings: SolverSettings::from(&config.calibration),
         gauge: config.calibration.gauge_corners.clone(),
     };
-    let result = calibrate(&dataset, &request)?;
+    let mut result = calibrate(&dataset, &request)?;
+    result.detector_noise_px = config.calibration.detector_noise_px;
     let written = output::write_calibration(set.path(), &result)?;
     set.commit()?;
     print!("{}", report::summary(&result));

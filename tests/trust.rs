@@ -58,3 +58,21 @@ fn free_parameters_count_the_gauge_out() {
         7 + 9 * frames + 2 * (corners - frozen) - 4
     );
 }
+
+#[test]
+fn calibration_json_and_summary_carry_the_trust_figures() {
+    let (bent, _) = data(Preset::T1, 20, 3, 1.0, 0.0);
+    let mut c = run(&bent, Method::Standard, Loss::Cauchy);
+    c.detector_noise_px = Some(0.15);
+    let json = deformcal::app::calibration_json::CalibrationJson::from(&c);
+    let t = c.trust(Some(0.15)).unwrap();
+    assert_eq!(json.noise_px, Some(0.15));
+    assert_eq!(json.noise_source.as_deref(), Some("config"));
+    assert_eq!(json.bias_ratio, Some(t.bias_ratio));
+    assert_eq!(json.parameters, Some(c.free_parameters()));
+    let summary = deformcal::app::report::summary(&c);
+    assert!(
+        summary.contains("the board may bend; compare with `dynamic`"),
+        "{summary}"
+    );
+}

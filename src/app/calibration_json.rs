@@ -67,6 +67,20 @@ pub struct CalibrationJson {
     /// Observations removed by outlier rejection (listed in `outliers.csv`).
     #[serde(default)]
     pub rejected_observations: usize,
+    /// σ̂, the detector noise per coordinate (SPEC §3a), and where it came from.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub noise_px: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub noise_source: Option<String>,
+    /// The share of the residual that the noise does not explain (SPEC §3a).
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub bias_ratio: Option<f64>,
+    /// Geometric AIC, pixels² (SPEC §3a).
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub g_aic: Option<f64>,
+    /// Free parameters after the gauge.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub parameters: Option<usize>,
     pub converged: bool,
     pub iterations: i32,
     #[serde(deserialize_with = "nan_if_null")]
@@ -125,11 +139,17 @@ impl From<&Calibration> for CalibrationJson {
             n[o.frame] += 1;
         }
         let bends = c.method.has_paraboloid();
+        let trust = c.trust(c.detector_noise_px);
         CalibrationJson {
             method: c.method.name().into(),
             rmse_px: c.rmse_px,
             observations: d.observations.len(),
             rejected_observations: c.rejected.len(),
+            noise_px: trust.map(|t| t.noise_px),
+            noise_source: trust.map(|t| t.noise_source.to_string()),
+            bias_ratio: trust.map(|t| t.bias_ratio),
+            g_aic: trust.map(|t| t.g_aic),
+            parameters: trust.map(|t| t.parameters),
             converged: c.converged,
             iterations: c.iterations(),
             seconds: c.seconds,

@@ -30,6 +30,9 @@ pub struct CalibrationConfig {
     /// Outlier rejection: observations beyond `outlier_k`·σ are dropped and the
     /// solve repeated until none is; 0 disables it.
     pub outlier_k: f64,
+    /// The detector's noise per image coordinate, pixels, for the bias ratio and
+    /// G-AIC; without it the noise is estimated from the residuals.
+    pub detector_noise_px: Option<f64>,
 }
 
 impl Default for CalibrationConfig {
@@ -48,6 +51,7 @@ impl Default for CalibrationConfig {
             gauge_corners: None,
             verbose: s.verbose,
             outlier_k: s.outlier_k,
+            detector_noise_px: None,
         }
     }
 }
@@ -742,6 +746,13 @@ impl Checker<'_> {
 
     /// `[calibration]` threads and tolerances within what Ceres accepts.
     fn check_solver_limits(&self, c: &CalibrationConfig) -> Result<()> {
+        if let Some(n) = c.detector_noise_px {
+            if !(n.is_finite() && n > 0.0 && n <= 100.0) {
+                return Err(self.err(format!(
+                    "calibration.detector_noise_px must be a positive number of pixels, at most 100 (got {n})"
+                )));
+            }
+        }
         if c.threads == 0 || c.threads > 256 {
             return Err(self.err(format!(
                 "calibration.threads must be 1 to 256 (got {})",

@@ -31,6 +31,7 @@ pub fn summary(c: &Calibration) -> String {
         c.rejected.len(),
         c.settings.outlier_k
     );
+    write_trust(&mut s, c);
     write_cameras(&mut s, c);
     write_rig(&mut s, c);
     write_board(&mut s, c);
@@ -38,6 +39,36 @@ pub fn summary(c: &Calibration) -> String {
         let _ = writeln!(s, "  warning: {w}");
     }
     s
+}
+
+/// The noise, the bias ratio and what it suggests (SPEC §3a).
+fn write_trust(s: &mut String, c: &Calibration) {
+    let Some(t) = c.trust(c.detector_noise_px) else {
+        return;
+    };
+    let source = if t.noise_source == "config" {
+        "as configured"
+    } else {
+        "estimated from neighbouring corners"
+    };
+    let verdict = if t.bias_ratio <= 0.1 {
+        "the noise explains the residual".to_string()
+    } else if c.method.has_paraboloid() {
+        format!(
+            "{:.0}% of the residual is more than noise: check the detections (outliers.csv) and the lens model",
+            100.0 * t.bias_ratio
+        )
+    } else {
+        format!(
+            "{:.0}% of the residual is more than noise: the board may bend; compare with `dynamic` (lower G-AIC is better)",
+            100.0 * t.bias_ratio
+        )
+    };
+    let _ = writeln!(
+        s,
+        "  noise {:.3} px ({source}); bias ratio {:.2}: {verdict}; G-AIC {:.1} with {} parameters",
+        t.noise_px, t.bias_ratio, t.g_aic, t.parameters
+    );
 }
 
 /// One line per camera: its size, lens model and intrinsics.

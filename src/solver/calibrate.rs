@@ -81,6 +81,9 @@ pub struct Calibration {
     pub settings: SolverSettings,
     /// Observations removed by outlier rejection (not in `dataset`).
     pub rejected: Vec<Suspect>,
+    /// The detector noise the user gave (`[calibration] detector_noise_px`), for
+    /// [`Calibration::trust`]; `None` estimates it.
+    pub detector_noise_px: Option<f64>,
 }
 
 /// An observation the robust loss down-weighted, or (without a loss) one far off.
@@ -570,6 +573,7 @@ pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {
         seconds: start.elapsed().as_secs_f64(),
         settings: request.settings.clone(),
         rejected,
+        detector_noise_px: None,
     })
 }
 
