@@ -265,35 +265,6 @@ fn chained_jacobian_equals_single_piece_autodiff() {
         state.frame_poses[1].rotation = [1e-3, -2e-3, 5e-4];
         state.frame_poses[2].rotation = [0.0101, 0.0, 0.0];
         state.camera_poses[1].rotation = [2e-4, 0.0, -1e-4];
-        let problem = c.problem();
-        let chained = problem
-            .evaluate(&state, &SolverSettings::default(), true)
-            .unwrap();
-        let reference = SolverSettings {
-            reference_jacobian: true,
-            ..SolverSettings::default()
-        };
-        let autodiff = problem.evaluate(&state, &reference, true).unwrap();
-        assert_eq!(
-            chained.jacobian_col_idx, autodiff.jacobian_col_idx,
-            "{m}: sparsity"
-        );
-        let scale = autodiff
-            .jacobian_values
-            .iter()
-            .fold(0.0f64, |a, v| a.max(v.abs()));
-        for (a, b) in chained
-            .jacobian_values
-            .iter()
-            .zip(&autodiff.jacobian_values)
-        {
-            assert!(
-                (a - b).abs() <= 1e-9 * scale + 1e-12 * b.abs(),
-                "{m}: {a} vs {b}"
-            );
-        }
-        for (a, b) in chained.residuals.iter().zip(&autodiff.residuals) {
-            assert!((a - b).abs() < 1e-9, "{m}: residual {a} vs {b}");
-        }
+        assert_chained_equals_autodiff(&c.problem(), &state, &m.to_string());
     }
 }

@@ -77,30 +77,7 @@ fn chained_jacobian_equals_autodiff_for_every_lens_model() {
         let (d, _) = through(Preset::Stereo, &models, 12, 5, 1.0);
         for m in Method::ALL {
             let c = run(&d, m, Loss::Cauchy);
-            let problem = c.problem();
-            let chained = problem
-                .evaluate(&c.state, &SolverSettings::default(), true)
-                .unwrap();
-            let reference = SolverSettings {
-                reference_jacobian: true,
-                ..SolverSettings::default()
-            };
-            let autodiff = problem.evaluate(&c.state, &reference, true).unwrap();
-            assert_eq!(chained.jacobian_col_idx, autodiff.jacobian_col_idx);
-            let scale = autodiff
-                .jacobian_values
-                .iter()
-                .fold(0.0f64, |a, v| a.max(v.abs()));
-            for (a, b) in chained
-                .jacobian_values
-                .iter()
-                .zip(&autodiff.jacobian_values)
-            {
-                assert!(
-                    (a - b).abs() <= 1e-9 * scale + 1e-12 * b.abs(),
-                    "{models:?} {m}: {a} vs {b}"
-                );
-            }
+            assert_chained_equals_autodiff(&c.problem(), &c.state, &format!("{models:?} {m}"));
         }
     }
 }

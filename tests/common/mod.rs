@@ -177,3 +177,41 @@ pub fn exact_settings() -> SolverSettings {
         ..SolverSettings::default()
     }
 }
+
+/// The chained Jacobian (and residuals) of `problem` at `state` equal the
+/// single-piece autodiff reference's; `label` names the case in failures.
+pub fn assert_chained_equals_autodiff(
+    problem: &deformcal::solver::problem::Problem,
+    state: &deformcal::solver::problem::State,
+    label: &str,
+) {
+    let chained = problem
+        .evaluate(state, &SolverSettings::default(), true)
+        .unwrap();
+    let reference = SolverSettings {
+        reference_jacobian: true,
+        ..SolverSettings::default()
+    };
+    let autodiff = problem.evaluate(state, &reference, true).unwrap();
+    assert_eq!(
+        chained.jacobian_col_idx, autodiff.jacobian_col_idx,
+        "{label}: sparsity"
+    );
+    let scale = autodiff
+        .jacobian_values
+        .iter()
+        .fold(0.0f64, |a, v| a.max(v.abs()));
+    for (a, b) in chained
+        .jacobian_values
+        .iter()
+        .zip(&autodiff.jacobian_values)
+    {
+        assert!(
+            (a - b).abs() <= 1e-9 * scale + 1e-12 * b.abs(),
+            "{label}: {a} vs {b}"
+        );
+    }
+    for (a, b) in chained.residuals.iter().zip(&autodiff.residuals) {
+        assert!((a - b).abs() < 1e-9, "{label}: residual {a} vs {b}");
+    }
+}
