@@ -544,6 +544,12 @@ fn brief(message: &str) -> String {
 }
 
 fn main() -> ExitCode {
+    // Like any Unix filter, end quietly when the reader of stdout goes away
+    // (`deformcal … | head`); Rust's default turns that into a panic.
+    // SAFETY: setting a signal's disposition to the default has no preconditions.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let cli = Cli::parse();
     let result = match cli.command {
         Some(Command::Calibrate(a)) => run_calibrate(a),

@@ -241,10 +241,72 @@ fn robust_sigma(residuals: &[f64]) -> f64 {
     1.4826 * *m
 }
 
-/// Which observations to reject this round: a coordinate beyond k·σ, worst first,
-/// as long as their view keeps enough corners for a homography.
+/// How far each observation's residual stands out from its neighbours' on the
+/// board: the residual minus the component-wise median of the residuals of its
+/// (up to four) adjacent corners in the same view, larger coordinate. A model
+/// error (a bend `standard` cannot follow) moves neighbours alike and cancels
+/// here; a bad detection does not. Without a neighbour, the residual itself.
+fn local_deviations(dataset: &Dataset, residuals: &[f64]) -> Vec<f64> {
+    let cols = dataset.target.cols;
+    let index: HashMap<(usize, usize, usize), usize> = dataset
+        .observations
+        .iter()
+        .enumerate()
+        .map(|(i, o)| ((o.camera, o.frame, o.corner), i))
+        .collect();
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        let n = v.len();
+        if n % 2 == 1 {
+            v[n / 2]
+        } else {
+            0.5 * (v[n / 2 - 1] + v[n / 2])
+        }
+    };
+    dataset
+        .observations
+        .iter()
+        .enumerate()
+        .map(|(i, o)| {
+            let (row, col) = (o.corner / cols, o.corner % cols);
+            let mut neighbours = Vec::with_capacity(4);
+            if col > 0 {
+                neighbours.push(o.corner - 1);
+            }
+            if col + 1 < cols {
+                neighbours.push(o.corner + 1);
+            }
+            if row > 0 {
+                neighbours.push(o.corner - cols);
+            }
+            neighbours.push(o.corner + cols);
+            let found: Vec<usize> = neighbours
+                .into_iter()
+                .filter_map(|c| index.get(&(o.camera, o.frame, c)).copied())
+                .collect();
+            let r = &residuals[2 * i..2 * i + 2];
+            if found.is_empty() {
+                return r[0].abs().max(r[1].abs());
+            }
+            let mut us: Vec<f64> = found.iter().map(|&j| residuals[2 * j]).collect();
+            let mut vs: Vec<f64> = found.iter().map(|&j| residuals[2 * j + 1]).collect();
+            (r[0] - median(&mut us))
+                .abs()
+                .max((r[1] - median(&mut vs)).abs())
+        })
+        .collect()
+}
+
+/// Which observations to reject this round: those whose residual stands out from
+/// their neighbours' by more than k·σ (σ of that local deviation, robustly),
+/// worst first, as long as their view keeps enough corners for a homography. A
+/// neighbour of a corner rejected this round waits for the next round, since the
+/// outlier's residual is part of its own comparison.
 fn pick_outliers(dataset: &Dataset, residuals: &[f64], k: f64) -> Vec<usize> {
-    let sigma = robust_sigma(residuals);
+    let deviations = local_deviations(dataset, residuals);
+    // Each deviation is the larger of two |coordinates|: for Gaussian noise of
+    // σ_d per coordinate its median is 1.052·σ_d (P(|x| < t)² = ½).
+    let sigma = robust_sigma(&deviations) / 1.4826 / 1.052;
     if sigma <= 0.0 {
         return Vec::new();
     }
@@ -252,19 +314,32 @@ fn pick_outliers(dataset: &Dataset, residuals: &[f64], k: f64) -> Vec<usize> {
     for o in &dataset.observations {
         *per_view.entry((o.camera, o.frame)).or_default() += 1;
     }
-    let mut worst: Vec<(usize, f64)> = residuals
-        .chunks(2)
+    let mut worst: Vec<(usize, f64)> = deviations
+        .iter()
         .enumerate()
-        .map(|(i, r)| (i, r[0].abs().max(r[1].abs())))
+        .map(|(i, &e)| (i, e))
         .filter(|&(_, e)| e > k * sigma)
         .collect();
     worst.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let cols = dataset.target.cols;
+    let mut taken: std::collections::HashSet<(usize, usize, usize)> = Default::default();
     let mut out = Vec::new();
     for (i, _) in worst {
         let o = &dataset.observations[i];
+        let near = |c: usize| {
+            let (a, b) = (c.min(o.corner), c.max(o.corner));
+            (b - a == 1 && a / cols == b / cols) || b - a == cols
+        };
+        if taken
+            .iter()
+            .any(|&(cam, f, c)| cam == o.camera && f == o.frame && near(c))
+        {
+            continue;
+        }
         let n = per_view.get_mut(&(o.camera, o.frame)).expect("counted");
         if *n > MIN_VIEW_CORNERS {
             *n -= 1;
+            taken.insert((o.camera, o.frame, o.corner));
             out.push(i);
         }
     }
