@@ -174,6 +174,8 @@ pub fn exact_settings() -> SolverSettings {
         parameter_tolerance: 1e-15,
         gradient_tolerance: 1e-15,
         max_iterations: 500,
+        // The peers reject nothing: compare fits of the same observations.
+        outlier_k: 0.0,
         ..SolverSettings::default()
     }
 }
