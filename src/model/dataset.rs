@@ -28,6 +28,18 @@ pub struct Dataset {
 pub const HEADER: [&str; 5] = ["camera", "frame", "corner", "u", "v"];
 
 impl Dataset {
+    /// A view's name for messages: "frame 7" with one camera, "cam1 frame 7" with several.
+    pub fn view_name(&self, camera: usize, frame: usize) -> String {
+        if self.cameras.len() == 1 {
+            format!("frame {}", self.frame_ids[frame])
+        } else {
+            format!(
+                "{} frame {}",
+                self.cameras[camera].name, self.frame_ids[frame]
+            )
+        }
+    }
+
     /// Number of frames (time steps).
     pub fn num_frames(&self) -> usize {
         self.frame_ids.len()

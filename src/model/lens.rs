@@ -289,14 +289,6 @@ impl Intrinsics {
         )
     }
 
-    /// The same camera under another parameter vector of the same model.
-    fn with(&self, values: [f64; MAX_PARAMS]) -> Self {
-        Intrinsics {
-            model: self.model,
-            values,
-        }
-    }
-
     /// Projects a camera-frame point to a pixel; `None` where the model has no
     /// image of it (behind a pinhole camera, outside a fisheye's valid domain).
     pub fn project(&self, xc: &Vector3<f64>) -> Option<Vector2<f64>> {
@@ -445,13 +437,6 @@ impl Intrinsics {
         let dx = (self.distort(x.x + h, x.y) - self.distort(x.x - h, x.y)) / (2.0 * h);
         let dy = (self.distort(x.x, x.y + h) - self.distort(x.x, x.y - h)) / (2.0 * h);
         Matrix2::new(dx.x, dy.x, dx.y, dy.y)
-    }
-
-    /// The same intrinsics with parameter `i` moved by `delta` (for derivatives).
-    pub fn perturbed(&self, i: usize, delta: f64) -> Self {
-        let mut v = self.values;
-        v[i] += delta;
-        self.with(v)
     }
 }
 

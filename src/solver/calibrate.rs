@@ -175,17 +175,6 @@ type View = (usize, usize);
 /// Board points and pixels of one view.
 type Correspondences = (Vec<Vector2<f64>>, Vec<Vector2<f64>>);
 
-fn view_name(dataset: &Dataset, (camera, frame): View) -> String {
-    if dataset.cameras.len() == 1 {
-        format!("frame {}", dataset.frame_ids[frame])
-    } else {
-        format!(
-            "{} frame {}",
-            dataset.cameras[camera].name, dataset.frame_ids[frame]
-        )
-    }
-}
-
 /// Board-to-pixel homography of every view, `None` for a degenerate one.
 fn homographies(dataset: &Dataset) -> HashMap<View, Option<Matrix3<f64>>> {
     let mut points: HashMap<View, Correspondences> = HashMap::new();
@@ -228,12 +217,12 @@ fn usable_views(
         warnings.push(if n < MIN_CORNERS_PER_IMAGE {
             format!(
                 "{} skipped: {n} corner(s), at least {MIN_CORNERS_PER_IMAGE} needed",
-                view_name(dataset, *v)
+                dataset.view_name(v.0, v.1)
             )
         } else {
             format!(
                 "{} skipped: its corners are collinear or degenerate",
-                view_name(dataset, *v)
+                dataset.view_name(v.0, v.1)
             )
         });
     }
@@ -399,7 +388,7 @@ fn init_zhang(
         views[j] = Some(zhang::pose_from_homography(&h, &kk).ok_or_else(|| {
             Error::Init(format!(
                 "{}: no board pose fits its homography",
-                view_name(dataset, (k, j))
+                dataset.view_name(k, j)
             ))
         })?);
     }

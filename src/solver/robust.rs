@@ -20,18 +20,6 @@ pub const OUTSIDE_MARGIN: f64 = 0.02;
 /// At most this many items are named in one warning.
 const NAMED: usize = 5;
 
-/// "frame 7" with one camera, "cam1 frame 7" with several.
-fn view_name(dataset: &Dataset, camera: usize, frame: usize) -> String {
-    if dataset.cameras.len() == 1 {
-        format!("frame {}", dataset.frame_ids[frame])
-    } else {
-        format!(
-            "{} frame {}",
-            dataset.cameras[camera].name, dataset.frame_ids[frame]
-        )
-    }
-}
-
 /// A list cut to its first few items.
 fn named(items: &[String]) -> String {
     let mut s = items[..items.len().min(NAMED)].join(", ");
@@ -58,7 +46,7 @@ pub fn drop_outside_image(dataset: &Dataset, warnings: &mut Vec<String>) -> Resu
         .map(|o| {
             format!(
                 "{} corner {} at ({:.1}, {:.1})",
-                view_name(dataset, o.camera, o.frame),
+                dataset.view_name(o.camera, o.frame),
                 o.corner,
                 o.uv[0],
                 o.uv[1]
@@ -156,7 +144,7 @@ pub fn drop_inconsistent_views(dataset: &Dataset, warnings: &mut Vec<String>) ->
     }
     let names: Vec<String> = bad
         .iter()
-        .map(|&((c, f), m)| format!("{} ({:.0}%)", view_name(dataset, c, f), 100.0 * m))
+        .map(|&((c, f), m)| format!("{} ({:.0}%)", dataset.view_name(c, f), 100.0 * m))
         .collect();
     warnings.push(format!(
         "{} view(s) dropped: their corners fit no planar board numbered as [target] (shuffled or wrong corner indices?): {}",
