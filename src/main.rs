@@ -5,8 +5,10 @@ use deformcal::app::config::Config;
 use deformcal::app::fsio::{self, OutputSet};
 use deformcal::app::protocol::{self, Shard};
 use deformcal::app::{output, report};
+use deformcal::model::selection::{AutoSettings, MethodChoice};
 use deformcal::model::synthetic::{Generator, Preset, MAX_IMAGES};
 use deformcal::solver::problem::SolverSettings;
+use deformcal::solver::select::calibrate_auto;
 use deformcal::{calibrate, Method, Request};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -39,6 +41,16 @@ enum Command {
     Batch(BatchArgs),
     /// Only detect the board in the config's photos: detections.csv and observations.csv.
     Detect(DetectArgs),
+    /// Compare two calibration.json files: mapping error between them beside their uncertainty.
+    Compare(CompareArgs),
+}
+
+#[derive(Args, Debug)]
+struct CompareArgs {
+    /// The first calibration.json.
+    a: PathBuf,
+    /// The second calibration.json.
+    b: PathBuf,
 }
 
 #[derive(Args, Debug)]
@@ -124,7 +136,7 @@ struct CalibrateArgs {
     /// The TOML config.
     #[arg(long, short)]
     config: Option<PathBuf>,
-    /// Override [calibration] method: standard, static, dynamic or full.
+    /// Override [calibration] method: standard, static, dynamic, full or auto.
     #[arg(long)]
     method: Option<String>,
     /// Override [output] dir.
@@ -163,8 +175,8 @@ fn run_calibrate(args: CalibrateArgs) -> Result<()> {
         .context("no config given: use --config FILE (see configs/ for examples)")?;
     let mut config = Config::load(&path)?;
     if let Some(m) = &args.method {
-        config.calibration.method = Method::parse(m).with_context(|| {
-            format!("--method: unknown method `{m}` (standard, static, dynamic, full)")
+        config.calibration.method = MethodChoice::parse(m).with_context(|| {
+            format!("--method: unknown method `{m}` (standard, static, dynamic, full, auto)")
         })?;
     }
     if let Some(o) = args.output {
@@ -178,12 +190,7 @@ fn run_calibrate(args: CalibrateArgs) -> Result<()> {
     // directory fails now, not after a long solve.
     let set = OutputSet::begin(&config.output_dir, fsio::calibration_files())?;
     let (dataset, _truth) = deformcal::app::source::load_data(&config)?;
-    let request = Request {
-        method: config.calibration.method,
-        settings: SolverSettings::from(&config.calibration),
-        gauge: config.calibration.gauge_corners.clone(),
-    };
-    let mut result = calibrate(&dataset, &request)?;
+    let mut result = run_method(&config, &dataset)?;
     result.detector_noise_px = config.calibration.detector_noise_px;
     let written = output::write_calibration(set.path(), &result)?;
     set.commit()?;
@@ -196,6 +203,34 @@ fn run_calibrate(args: CalibrateArgs) -> Result<()> {
         config.output_dir.join("calibration.json").display()
     );
     Ok(())
+}
+
+/// One calibration with the config's method, or `auto`'s choice with a progress bar.
+fn run_method(config: &Config, dataset: &deformcal::Dataset) -> Result<deformcal::Calibration> {
+    let c = &config.calibration;
+    let request = |method| Request {
+        method,
+        settings: SolverSettings::from(c),
+        gauge: c.gauge_corners.clone(),
+    };
+    match c.method {
+        MethodChoice::Fixed(m) => Ok(calibrate(dataset, &request(m))?),
+        MethodChoice::Auto => {
+            let auto = AutoSettings::from(c);
+            let solves = auto.candidates.len() * (auto.folds + 1);
+            let bar = indicatif::ProgressBar::new(solves as u64).with_style(
+                indicatif::ProgressStyle::with_template(
+                    "auto: {msg} [{bar:40}] {pos}/{len} calibrations, {elapsed} elapsed, ETA {eta}",
+                )
+                .expect("valid template")
+                .progress_chars("=> "),
+            );
+            bar.set_message(format!("{}-fold cross-validation", auto.folds));
+            let result = calibrate_auto(dataset, &request(Method::Standard), &auto, &|| bar.inc(1));
+            bar.finish_and_clear();
+            Ok(result?)
+        }
+    }
 }
 
 fn run_generate(args: GenerateArgs) -> Result<()> {
@@ -278,17 +313,28 @@ fn run_detect(args: DetectArgs) -> Result<()> {
     Ok(())
 }
 
+fn run_compare(args: CompareArgs) -> Result<()> {
+    use deformcal::app::calibration_json::CalibrationJson;
+    use deformcal::app::compare;
+    let (a, b) = (
+        CalibrationJson::load(&args.a)?,
+        CalibrationJson::load(&args.b)?,
+    );
+    let diffs = compare::compare(&a, &b)
+        .with_context(|| format!("{} vs {}", args.a.display(), args.b.display()))?;
+    print!(
+        "{}",
+        compare::format(
+            &args.a.display().to_string(),
+            &args.b.display().to_string(),
+            &diffs
+        )
+    );
+    Ok(())
+}
+
 fn run_export(args: ExportArgs) -> Result<()> {
-    let text = fsio::read_limited(&args.calibration, fsio::MAX_DATA_BYTES)?;
-    let json: deformcal::app::calibration_json::CalibrationJson = serde_json::from_slice(&text)
-        .with_context(|| {
-            format!(
-                "{}: not a deformcal calibration.json",
-                args.calibration.display()
-            )
-        })?;
-    json.check_models()
-        .map_err(|m| anyhow::anyhow!("{}: {m}", args.calibration.display()))?;
+    let json = deformcal::app::calibration_json::CalibrationJson::load(&args.calibration)?;
     let set = OutputSet::begin(&args.output, fsio::calibration_files())?;
     for w in output::write_models(set.path(), &json)?.warnings {
         eprintln!("warning: {w}");
@@ -560,6 +606,7 @@ fn main() -> ExitCode {
         Some(Command::Merge(a)) => run_merge(a),
         Some(Command::Batch(a)) => run_batch(a),
         Some(Command::Detect(a)) => run_detect(a),
+        Some(Command::Compare(a)) => run_compare(a),
         None => run_calibrate(cli.calibrate),
     };
     match result {

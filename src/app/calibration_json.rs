@@ -2,6 +2,7 @@
 //! `export` and the C API read back.
 use crate::model::board::Paraboloid;
 use crate::model::lens::{Intrinsics, LensModel};
+use crate::model::selection::Selection;
 use crate::solver::calibrate::{Calibration, Stage};
 use serde::{Deserialize, Deserializer, Serialize};
 
@@ -24,6 +25,20 @@ pub struct CameraJson {
 }
 
 impl CalibrationJson {
+    /// Reads a `calibration.json` deformcal wrote, its models checked.
+    pub fn load(path: &std::path::Path) -> crate::Result<CalibrationJson> {
+        let data_error = |line: usize, message: String| crate::Error::Data {
+            path: path.to_path_buf(),
+            line: line as u64,
+            message,
+        };
+        let text = crate::app::fsio::read_limited(path, crate::app::fsio::MAX_DATA_BYTES)?;
+        let json: CalibrationJson = serde_json::from_slice(&text)
+            .map_err(|e| data_error(e.line(), format!("not a deformcal calibration.json: {e}")))?;
+        json.check_models().map_err(|m| data_error(0, m))?;
+        Ok(json)
+    }
+
     /// Every camera's intrinsics are of the model the camera names: the keys of
     /// `intrinsics` pick a model, and a file edited by hand may disagree.
     pub fn check_models(&self) -> std::result::Result<(), String> {
@@ -96,6 +111,9 @@ pub struct CalibrationJson {
     pub initial_intrinsics: Vec<Intrinsics>,
     pub stages: Vec<StageJson>,
     pub warnings: Vec<String>,
+    /// With `method = "auto"`: every candidate's figures and why `method` was chosen.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub auto: Option<Selection>,
 }
 
 /// A solver stage in `calibration.json`.
@@ -195,6 +213,7 @@ impl From<&Calibration> for CalibrationJson {
             initial_intrinsics: c.initial_intrinsics.clone(),
             stages: c.stages.iter().map(StageJson::from).collect(),
             warnings: c.warnings.clone(),
+            auto: c.selection.clone(),
         }
     }
 }

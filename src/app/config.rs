@@ -2,6 +2,7 @@
 use crate::error::{Error, Result};
 use crate::model::board::Method;
 use crate::model::camera::CameraSpec;
+use crate::model::selection::{AutoSettings, MethodChoice};
 use crate::model::synthetic::{Preset, MAX_IMAGES};
 use crate::model::target::Target;
 use crate::solver::calibrate::MIN_IMAGES;
@@ -14,7 +15,14 @@ use std::path::{Path, PathBuf};
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct CalibrationConfig {
-    pub method: Method,
+    /// A method, or `auto` (chosen by cross-validation among `auto_candidates`).
+    pub method: MethodChoice,
+    /// The methods `auto` tries (`standard` must be among them).
+    pub auto_candidates: Vec<Method>,
+    /// k of `auto`'s k-fold cross-validation over frames.
+    pub cv_folds: usize,
+    /// Seed of `auto`'s shuffle of the frames into folds.
+    pub cv_seed: u64,
     pub loss: Loss,
     pub loss_scale_px: f64,
     /// Ceres threads for one solve.
@@ -39,8 +47,12 @@ impl Default for CalibrationConfig {
     fn default() -> Self {
         // One set of solver defaults: the solver's own.
         let s = SolverSettings::default();
+        let auto = AutoSettings::default();
         CalibrationConfig {
-            method: Method::Full,
+            method: MethodChoice::Fixed(Method::Full),
+            auto_candidates: auto.candidates,
+            cv_folds: auto.folds,
+            cv_seed: auto.seed,
             loss: s.loss,
             loss_scale_px: s.loss_scale_px,
             threads: s.threads,
@@ -52,6 +64,17 @@ impl Default for CalibrationConfig {
             verbose: s.verbose,
             outlier_k: s.outlier_k,
             detector_noise_px: None,
+        }
+    }
+}
+
+impl From<&CalibrationConfig> for AutoSettings {
+    fn from(c: &CalibrationConfig) -> Self {
+        AutoSettings {
+            candidates: c.auto_candidates.clone(),
+            folds: c.cv_folds,
+            seed: c.cv_seed,
+            detector_noise_px: c.detector_noise_px,
         }
     }
 }
@@ -316,6 +339,8 @@ pub const MAX_NAME_BYTES: usize = 200;
 pub const LOSS_SCALE_RANGE: (f64, f64) = (1e-3, 1e4);
 /// The range of a non-zero `outlier_k`: below 2 good data is rejected wholesale.
 pub const OUTLIER_K_RANGE: (f64, f64) = (2.0, 100.0);
+/// Most folds `auto` cross-validates with (each fold is a full calibration per candidate).
+pub const MAX_CV_FOLDS: usize = 20;
 
 /// A value cut to a readable length for a message.
 pub fn short(s: &str) -> String {
@@ -387,27 +412,68 @@ impl Checker<'_> {
                 c.outlier_k
             )));
         }
+        self.check_auto(c)?;
         if let Some(g) = &c.gauge_corners {
-            let need = c.method.gauge_corners();
+            self.check_gauge(c, g, target)?;
+        }
+        Ok(())
+    }
+
+    /// `auto`'s candidates and folds.
+    fn check_auto(&self, c: &CalibrationConfig) -> Result<()> {
+        if !c.auto_candidates.contains(&Method::Standard) {
+            return Err(self.err(
+                "calibration.auto_candidates must include `standard` (the baseline auto compares against)".into(),
+            ));
+        }
+        if let Some((_, m)) = c
+            .auto_candidates
+            .iter()
+            .enumerate()
+            .find(|(i, m)| c.auto_candidates[..*i].contains(m))
+        {
+            return Err(self.err(format!("calibration.auto_candidates lists `{m}` twice")));
+        }
+        if !(2..=MAX_CV_FOLDS).contains(&c.cv_folds) {
+            return Err(self.err(format!(
+                "calibration.cv_folds must be 2 to {MAX_CV_FOLDS} (got {})",
+                c.cv_folds
+            )));
+        }
+        Ok(())
+    }
+
+    /// Gauge corners: as many as each method that uses them needs, on the board, distinct.
+    fn check_gauge(&self, c: &CalibrationConfig, g: &[usize], target: &Target) -> Result<()> {
+        let methods: Vec<Method> = match c.method {
+            MethodChoice::Fixed(m) => vec![m],
+            MethodChoice::Auto => c
+                .auto_candidates
+                .iter()
+                .copied()
+                .filter(|m| m.has_correction())
+                .collect(),
+        };
+        for method in methods {
+            let need = method.gauge_corners();
             if g.len() != need {
                 return Err(self.err(format!(
-                    "calibration.gauge_corners: method `{}` needs exactly {need} corners (got {})",
-                    c.method,
+                    "calibration.gauge_corners: method `{method}` needs exactly {need} corners (got {})",
                     g.len()
                 )));
             }
-            if let Some(bad) = g.iter().find(|&&i| i >= target.num_corners()) {
-                return Err(self.err(format!(
-                    "calibration.gauge_corners: corner {bad} is not on the {} × {} board",
-                    target.rows, target.cols
-                )));
-            }
-            if let Some((i, dup)) = g.iter().enumerate().find(|(i, c)| g[..*i].contains(c)) {
-                return Err(self.err(format!(
-                    "calibration.gauge_corners: corner {dup} is given twice (entries {} and {i})",
-                    g.iter().position(|x| x == dup).unwrap_or(0)
-                )));
-            }
+        }
+        if let Some(bad) = g.iter().find(|&&i| i >= target.num_corners()) {
+            return Err(self.err(format!(
+                "calibration.gauge_corners: corner {bad} is not on the {} × {} board",
+                target.rows, target.cols
+            )));
+        }
+        if let Some((i, dup)) = g.iter().enumerate().find(|(i, c)| g[..*i].contains(c)) {
+            return Err(self.err(format!(
+                "calibration.gauge_corners: corner {dup} is given twice (entries {} and {i})",
+                g.iter().position(|x| x == dup).unwrap_or(0)
+            )));
         }
         Ok(())
     }

@@ -2,6 +2,7 @@
 //! reports and plots, and the C API. Builds on the model and solver layers.
 pub mod calibration_json;
 pub mod capi;
+pub mod compare;
 pub mod config;
 pub mod corners_vnl;
 pub mod detect;

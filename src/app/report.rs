@@ -1,4 +1,6 @@
 //! The short human summary printed after a calibration.
+use crate::model::board::Method;
+use crate::model::selection::Selection;
 use crate::solver::calibrate::Calibration;
 use std::fmt::Write;
 
@@ -32,6 +34,9 @@ pub fn summary(c: &Calibration) -> String {
         c.settings.outlier_k
     );
     write_trust(&mut s, c);
+    if let Some(sel) = &c.selection {
+        write_selection(&mut s, sel, c);
+    }
     write_cameras(&mut s, c);
     write_rig(&mut s, c);
     write_board(&mut s, c);
@@ -69,6 +74,75 @@ fn write_trust(s: &mut String, c: &Calibration) {
         "  noise {:.3} px ({source}); bias ratio {:.2}: {verdict}; G-AIC {:.1} with {} parameters",
         t.noise_px, t.bias_ratio, t.g_aic, t.parameters
     );
+}
+
+/// `auto`'s table of candidates and its verdict.
+fn write_selection(s: &mut String, sel: &Selection, c: &Calibration) {
+    let _ = writeln!(
+        s,
+        "  auto: {}-fold cross-validation over frames (seed {})",
+        sel.folds, sel.seed
+    );
+    let _ = writeln!(
+        s,
+        "    {:9} {:>12} {:>10} {:>12} {:>6} {:>12} {:>7}",
+        "method", "CV RMSE px", "± noise", "train RMSE", "bias", "G-AIC", "params"
+    );
+    let f = |v: Option<f64>, digits: usize| {
+        v.map(|x| format!("{x:.digits$}"))
+            .unwrap_or_else(|| "–".into())
+    };
+    for k in &sel.candidates {
+        let mark = if k.method == sel.chosen { "*" } else { " " };
+        let _ = writeln!(
+            s,
+            "  {mark} {:9} {:>12} {:>10} {:>12} {:>6} {:>12} {:>7}{}",
+            k.method.name(),
+            f(k.cv_rmse_px, 4),
+            f(k.cv_noise_px, 4),
+            f(k.rmse_px, 4),
+            f(k.bias_ratio, 2),
+            f(k.g_aic, 1),
+            k.parameters,
+            k.failed
+                .as_ref()
+                .map(|e| format!("  ({e})"))
+                .unwrap_or_default()
+        );
+    }
+    let _ = writeln!(s, "  verdict: {}", verdict(sel, c));
+    let _ = writeln!(s, "    ({})", sel.reason);
+}
+
+/// One sentence: does the board bend, by how much, what it changes, which method.
+pub fn verdict(sel: &Selection, c: &Calibration) -> String {
+    if sel.chosen == Method::Standard {
+        return "no bending detected above noise: `standard`".into();
+    }
+    let mut parts = Vec::new();
+    if sel.chosen.has_paraboloid() {
+        parts.push(format!(
+            "the board bends by up to {:.1} mm",
+            1e3 * c.max_out_of_plane()
+        ));
+    }
+    if sel.chosen.has_correction() {
+        let worst = c
+            .state
+            .corrections
+            .iter()
+            .map(|d| (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt())
+            .fold(0.0, f64::max);
+        parts.push(format!(
+            "its corners sit up to {:.2} mm off the nominal grid",
+            1e3 * worst
+        ));
+    }
+    parts.push(format!(
+        "modelling it moves the projection by {:.2} px",
+        sel.projection_shift_px
+    ));
+    format!("{}: use `{}`", parts.join("; "), sel.chosen)
 }
 
 /// One line per camera: its size, lens model and intrinsics.

@@ -8,6 +8,7 @@ pub mod lens;
 pub mod metrics;
 pub mod pose;
 pub mod rig;
+pub mod selection;
 pub mod state;
 pub mod synthetic;
 pub mod target;

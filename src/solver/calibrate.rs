@@ -5,6 +5,7 @@ use crate::model::camera::CameraSpec;
 use crate::model::dataset::Dataset;
 use crate::model::lens::Intrinsics;
 use crate::model::pose::Pose;
+use crate::model::selection::Selection;
 use crate::model::{fisheye_init, zhang};
 use crate::solver::problem::{
     choose_gauge, rmse, underobserved_corners, Hold, Problem, SolveReport, SolverSettings, State,
@@ -84,6 +85,8 @@ pub struct Calibration {
     /// The detector noise the user gave (`[calibration] detector_noise_px`), for
     /// [`Calibration::trust`]; `None` estimates it.
     pub detector_noise_px: Option<f64>,
+    /// With `method = "auto"`: why this method was chosen, and every candidate's figures.
+    pub selection: Option<Selection>,
 }
 
 /// An observation the robust loss down-weighted, or (without a loss) one far off.
@@ -563,6 +566,7 @@ pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {
         settings: request.settings.clone(),
         rejected,
         detector_noise_px: None,
+        selection: None,
     })
 }
 

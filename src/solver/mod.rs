@@ -5,4 +5,5 @@ mod bridge;
 pub mod calibrate;
 pub mod problem;
 pub mod robust;
+pub mod select;
 mod trust;

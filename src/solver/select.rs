@@ -1,0 +1,288 @@
+//! `method = "auto"`: calibrates every candidate method on all the data and in
+//! k-fold cross-validation over frames, then keeps the method the held-out frames
+//! support (the rule is `model::selection::choose`). The held-out error is the
+//! protocol's test error: each held frame's board pose is refitted with the
+//! trained camera (intrinsics, rig, static correction) held and the board unbent,
+//! so every candidate is judged with the same per-frame freedom.
+use crate::error::{Error, Result};
+use crate::model::board::{Method, Paraboloid};
+use crate::model::dataset::Dataset;
+use crate::model::lens::Intrinsics;
+use crate::model::metrics::mapping_error;
+use crate::model::selection::{self, AutoSettings, Candidate, HeldOut, Selection};
+use crate::model::state::State;
+use crate::solver::calibrate::{calibrate, Calibration, Request, MIN_IMAGES};
+use crate::solver::problem::{Hold, Loss, Problem, SolverSettings};
+use rayon::prelude::*;
+
+/// Fewest frames per fold: a held-out error from fewer frames is mostly noise.
+const MIN_FRAMES_PER_FOLD: usize = 2;
+
+/// The candidates in the order the rule needs: fewest free parameters first.
+fn by_complexity(fits: &[(Method, Result<Calibration>)]) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..fits.len()).collect();
+    order.sort_by_key(|&i| {
+        let p = fits[i].1.as_ref().map(|c| c.free_parameters()).ok();
+        (p.is_none(), p.unwrap_or(usize::MAX), fits[i].0)
+    });
+    order
+}
+
+/// Checks the settings against the data before any solve.
+fn check(dataset: &Dataset, auto: &AutoSettings) -> Result<()> {
+    if !auto.candidates.contains(&Method::Standard) {
+        return Err(Error::Invalid(
+            "method = \"auto\" needs `standard` among its candidates (the baseline)".into(),
+        ));
+    }
+    let need = auto.folds * MIN_FRAMES_PER_FOLD;
+    if auto.folds < 2 || dataset.num_frames() < need.max(MIN_IMAGES + MIN_FRAMES_PER_FOLD) {
+        return Err(Error::Degenerate(format!(
+            "method = \"auto\" with {}-fold cross-validation needs at least {} images (got {}); \
+             lower calibration.cv_folds or choose a method",
+            auto.folds,
+            need.max(MIN_IMAGES + MIN_FRAMES_PER_FOLD),
+            dataset.num_frames()
+        )));
+    }
+    Ok(())
+}
+
+/// Calibrates with every candidate (all data) and picks one by cross-validation;
+/// `tick` is called once per finished solve (candidates × (folds + 1)).
+pub fn calibrate_auto(
+    dataset: &Dataset,
+    request: &Request,
+    auto: &AutoSettings,
+    tick: &(dyn Fn() + Sync),
+) -> Result<Calibration> {
+    check(dataset, auto)?;
+    let fits: Vec<(Method, Result<Calibration>)> = auto
+        .candidates
+        .par_iter()
+        .map(|&m| {
+            let r = calibrate(
+                dataset,
+                &Request {
+                    method: m,
+                    ..request.clone()
+                },
+            )
+            .map(|mut c| {
+                c.detector_noise_px = auto.detector_noise_px;
+                c
+            });
+            tick();
+            (m, r)
+        })
+        .collect();
+    let standard = fits
+        .iter()
+        .find(|(m, _)| *m == Method::Standard)
+        .map(|(_, r)| r)
+        .expect("checked: standard is a candidate");
+    let standard = match standard {
+        Ok(c) => c,
+        Err(e) => return Err(Error::Degenerate(format!("`standard` failed: {e}"))),
+    };
+    // Every candidate is cross-validated on the same data: what `standard` kept.
+    let cv = &standard.dataset;
+    let folds = selection::folds(cv.num_frames(), auto.folds, auto.seed);
+    let held = cross_validate(cv, standard, request, auto, &folds, tick);
+    let order = by_complexity(&fits);
+    let mut entries: Vec<(Candidate, Option<HeldOut>)> = order
+        .iter()
+        .map(|&i| summarise(&fits[i], held[i].clone()))
+        .collect();
+    let (chosen_at, reason) = selection::choose(&mut entries)
+        .ok_or_else(|| Error::Degenerate("no candidate method could be cross-validated".into()))?;
+    let chosen = entries[chosen_at].0.method;
+    let standard_intrinsics = standard.state.intrinsics.clone();
+    let (_, result) = fits
+        .into_iter()
+        .find(|(m, _)| *m == chosen)
+        .expect("the chosen method is a candidate");
+    let mut result = result?;
+    let shift = projection_shift(&standard_intrinsics, &result);
+    result.selection = Some(Selection {
+        chosen,
+        folds: auto.folds,
+        seed: auto.seed,
+        candidates: entries.into_iter().map(|(c, _)| c).collect(),
+        reason,
+        projection_shift_px: shift,
+    });
+    Ok(result)
+}
+
+/// Largest mapping error between `standard`'s intrinsics and the result's, px.
+fn projection_shift(standard: &[Intrinsics], result: &Calibration) -> f64 {
+    result
+        .dataset
+        .cameras
+        .iter()
+        .zip(standard.iter().zip(&result.state.intrinsics))
+        .map(|(cam, (a, b))| mapping_error(a, b, cam.width, cam.height))
+        .fold(0.0, f64::max)
+}
+
+/// A candidate's figures from its fit to all data, with its held-out error.
+fn summarise(
+    fit: &(Method, Result<Calibration>),
+    held: Option<HeldOut>,
+) -> (Candidate, Option<HeldOut>) {
+    let (method, result) = fit;
+    let mut c = Candidate {
+        method: *method,
+        cv_rmse_px: None,
+        cv_noise_px: None,
+        rmse_px: None,
+        g_aic: None,
+        bias_ratio: None,
+        parameters: 0,
+        max_bend_m: None,
+        failed: None,
+    };
+    match result {
+        Ok(fit) => {
+            let trust = fit.trust(fit.detector_noise_px);
+            c.rmse_px = Some(fit.rmse_px);
+            c.g_aic = trust.map(|t| t.g_aic);
+            c.bias_ratio = trust.map(|t| t.bias_ratio);
+            c.parameters = fit.free_parameters();
+            c.max_bend_m = method.has_paraboloid().then(|| fit.max_out_of_plane());
+        }
+        Err(e) => c.failed = Some(format!("fit to all data: {e}")),
+    }
+    if result.is_ok() && held.is_none() {
+        c.failed = Some("a cross-validation fold failed".into());
+    }
+    let held = if result.is_ok() { held } else { None };
+    (c, held)
+}
+
+/// Every candidate's held-out error over all folds; `None` where a fold failed.
+fn cross_validate(
+    cv: &Dataset,
+    standard: &Calibration,
+    request: &Request,
+    auto: &AutoSettings,
+    folds: &[Vec<usize>],
+    tick: &(dyn Fn() + Sync),
+) -> Vec<Option<HeldOut>> {
+    // Folds are clean data: outliers were rejected on all of it already.
+    let settings = SolverSettings {
+        outlier_k: 0.0,
+        ..request.settings.clone()
+    };
+    let tasks: Vec<(usize, usize)> = (0..auto.candidates.len())
+        .flat_map(|c| (0..folds.len()).map(move |f| (c, f)))
+        .collect();
+    let results: Vec<Option<(Vec<usize>, HeldOut)>> = tasks
+        .par_iter()
+        .map(|&(c, f)| {
+            let r = fold_error(
+                cv,
+                standard,
+                auto.candidates[c],
+                &settings,
+                request,
+                &folds[f],
+            );
+            tick();
+            r.ok().map(|h| (folds[f].clone(), h))
+        })
+        .collect();
+    (0..auto.candidates.len())
+        .map(|c| {
+            let mut total = HeldOut::new(cv.num_frames());
+            for (t, r) in tasks.iter().zip(&results) {
+                if t.0 != c {
+                    continue;
+                }
+                let (frames, h) = r.as_ref()?;
+                for (i, &j) in frames.iter().enumerate() {
+                    total.squared[j] = h.squared[i];
+                    total.points[j] = h.points[i];
+                }
+            }
+            Some(total)
+        })
+        .collect()
+}
+
+/// Trains `method` on all frames but `held` and measures it on `held` (indexed
+/// like `held`).
+fn fold_error(
+    cv: &Dataset,
+    standard: &Calibration,
+    method: Method,
+    settings: &SolverSettings,
+    request: &Request,
+    held: &[usize],
+) -> Result<HeldOut> {
+    let train: Vec<usize> = (0..cv.num_frames()).filter(|j| !held.contains(j)).collect();
+    let trained = calibrate(
+        &cv.subset(&train),
+        &Request {
+            method,
+            settings: settings.clone(),
+            ..request.clone()
+        },
+    )?;
+    held_out_error(&trained, &cv.subset(held), held, standard, settings)
+}
+
+/// The held frames refitted with the trained camera held: only the poses free.
+fn held_out_error(
+    trained: &Calibration,
+    test: &Dataset,
+    held: &[usize],
+    standard: &Calibration,
+    settings: &SolverSettings,
+) -> Result<HeldOut> {
+    let settings = SolverSettings {
+        loss: Loss::None,
+        ..settings.clone()
+    };
+    let frames = held.len();
+    let mut state = State {
+        intrinsics: trained.state.intrinsics.clone(),
+        camera_poses: trained.state.camera_poses.clone(),
+        // `standard` saw every frame: its poses start the refit.
+        frame_poses: held
+            .iter()
+            .map(|&j| standard.state.frame_poses[j])
+            .collect(),
+        deformations: vec![Paraboloid::default(); frames],
+        corrections: trained.state.corrections.clone(),
+    };
+    let with_correction = trained.method.has_correction();
+    let problem = Problem {
+        dataset: test,
+        method: if with_correction {
+            Method::Static
+        } else {
+            Method::Standard
+        },
+        gauge: if with_correction {
+            trained.gauge.clone()
+        } else {
+            Vec::new()
+        },
+        frozen: trained.frozen.clone(),
+        hold: Hold {
+            intrinsics: true,
+            camera_poses: true,
+            corrections: true,
+            deformations: true,
+        },
+    };
+    let report = problem.solve(&mut state, &settings)?;
+    let mut out = HeldOut::new(frames);
+    for (o, r) in test.observations.iter().zip(report.residuals.chunks(2)) {
+        out.squared[o.frame] += r[0] * r[0] + r[1] * r[1];
+        out.points[o.frame] += 1;
+    }
+    Ok(out)
+}

@@ -1,0 +1,154 @@
+//! `method = "auto"` against synthetic truth: it picks a deformation model where
+//! the board bends, keeps `standard` (or something no worse) where it does not,
+//! and never returns a model whose cross-validated error is worse than
+//! `standard`'s by more than its noise.
+mod common;
+use common::*;
+use deformcal::model::metrics::mapping_error;
+use deformcal::model::selection::{AutoSettings, Selection};
+use deformcal::model::synthetic::{Preset, Truth};
+use deformcal::solver::problem::SolverSettings;
+use deformcal::solver::select::calibrate_auto;
+use deformcal::{Calibration, Dataset, Method, Request};
+
+fn auto(d: &Dataset) -> Calibration {
+    let request = Request {
+        method: Method::Standard,
+        settings: SolverSettings::default(),
+        gauge: None,
+    };
+    let settings = AutoSettings {
+        detector_noise_px: Some(0.15),
+        ..AutoSettings::default()
+    };
+    calibrate_auto(d, &request, &settings, &|| {}).expect("auto calibrates")
+}
+
+fn candidate(sel: &Selection, m: Method) -> &deformcal::model::selection::Candidate {
+    sel.candidates.iter().find(|c| c.method == m).unwrap()
+}
+
+/// The chosen method is never worse than `standard` by more than its noise.
+fn no_worse_than_standard(name: &str, sel: &Selection) {
+    let chosen = candidate(sel, sel.chosen);
+    let standard = candidate(sel, Method::Standard);
+    let (c, s) = (chosen.cv_rmse_px.unwrap(), standard.cv_rmse_px.unwrap());
+    let noise = standard
+        .cv_noise_px
+        .unwrap()
+        .max(chosen.cv_noise_px.unwrap());
+    assert!(
+        c <= s + noise,
+        "{name}: chosen {c} vs standard {s} ± {noise}"
+    );
+}
+
+fn truth_error(c: &Calibration, truth: &Truth) -> f64 {
+    let cam = &c.dataset.cameras[0];
+    mapping_error(
+        &truth.intrinsics[0],
+        &c.state.intrinsics[0],
+        cam.width,
+        cam.height,
+    )
+}
+
+#[test]
+fn auto_models_the_bend_of_the_bending_presets() {
+    for (preset, seed) in [(Preset::T1, 3), (Preset::T2, 4), (Preset::T3, 5)] {
+        let name = preset.name();
+        let (d, truth) = data(preset, 40, seed, 1.0, 1.0);
+        let c = auto(&d);
+        let sel = c.selection.clone().expect("auto records its choice");
+        eprintln!("{name}: {} — {}", sel.chosen, sel.reason);
+        for k in &sel.candidates {
+            eprintln!(
+                "  {:8} cv {:.4} ± {:.4} px, train {:.4}, bias {:.2}",
+                k.method,
+                k.cv_rmse_px.unwrap(),
+                k.cv_noise_px.unwrap(),
+                k.rmse_px.unwrap(),
+                k.bias_ratio.unwrap()
+            );
+        }
+        assert!(
+            matches!(sel.chosen, Method::Dynamic | Method::Full),
+            "{name}: chose {}",
+            sel.chosen
+        );
+        assert_eq!(c.method, sel.chosen, "{name}: the result is the chosen fit");
+        no_worse_than_standard(name, &sel);
+        // What auto delivers is closer to the true lens than `standard` is.
+        let standard = run(
+            &d,
+            Method::Standard,
+            deformcal::solver::problem::Loss::Cauchy,
+        );
+        let (e_auto, e_std) = (truth_error(&c, &truth), truth_error(&standard, &truth));
+        eprintln!("  mapping error to truth: auto {e_auto:.3} px, standard {e_std:.3} px");
+        assert!(e_auto < e_std, "{name}: {e_auto} vs {e_std}");
+        // The shift it reports is the one between the two fits.
+        let shift = mapping_error(
+            &standard.state.intrinsics[0],
+            &c.state.intrinsics[0],
+            1936,
+            1216,
+        );
+        assert!((sel.projection_shift_px - shift).abs() < 1e-6 * shift.max(1.0));
+    }
+}
+
+#[test]
+fn auto_keeps_standard_on_rigid_and_stiff_boards() {
+    // A rigid, perfectly printed board, and the stiff T4 as generated.
+    let cases = [
+        ("rigid", data(Preset::T2, 40, 6, 0.0, 0.0).0),
+        ("t4", data(Preset::T4, 40, 7, 1.0, 1.0).0),
+    ];
+    for (name, d) in cases {
+        let c = auto(&d);
+        let sel = c.selection.clone().unwrap();
+        eprintln!("{name}: {} — {}", sel.chosen, sel.reason);
+        no_worse_than_standard(name, &sel);
+        if name == "rigid" {
+            assert_eq!(sel.chosen, Method::Standard, "{name}: {}", sel.reason);
+            let summary = deformcal::app::report::summary(&c);
+            assert!(
+                summary.contains("verdict: no bending detected above noise: `standard`"),
+                "{summary}"
+            );
+        }
+    }
+}
+
+#[test]
+fn auto_is_written_to_calibration_json_and_read_back() {
+    let (d, _) = data(Preset::T1, 20, 8, 1.0, 1.0);
+    let c = auto(&d);
+    let json = deformcal::app::calibration_json::CalibrationJson::from(&c);
+    assert_eq!(json.method, c.method.name());
+    let sel = json.auto.clone().unwrap();
+    assert_eq!(sel.chosen, c.method);
+    assert_eq!(sel.candidates.len(), 3);
+    let text = serde_json::to_string(&json).unwrap();
+    let back: deformcal::app::calibration_json::CalibrationJson =
+        serde_json::from_str(&text).unwrap();
+    assert_eq!(back.auto, json.auto);
+    assert!(text.contains("\"cv_rmse_px\""), "{text}");
+}
+
+#[test]
+fn auto_refuses_too_few_images_for_its_folds() {
+    let (d, _) = data(Preset::T2, 8, 9, 1.0, 1.0);
+    let request = Request {
+        method: Method::Standard,
+        settings: SolverSettings::default(),
+        gauge: None,
+    };
+    let e = calibrate_auto(&d, &request, &AutoSettings::default(), &|| {}).unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "degenerate data: method = \"auto\" with 5-fold cross-validation needs at least 10 images (got 8); \
+         lower calibration.cv_folds or choose a method"
+    );
+}
