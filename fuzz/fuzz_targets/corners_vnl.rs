@@ -2,7 +2,7 @@
 //! The corners.vnl parser never panics, with and without camera patterns.
 use deformcal::model::camera::CameraSpec;
 use deformcal::app::corners_vnl::parse_corners_vnl;
-use deformcal::Target;
+use deformcal::{LensModel, Target};
 use libfuzzer_sys::fuzz_target;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -10,7 +10,7 @@ use std::path::Path;
 fuzz_target!(|data: &[u8]| {
     let Some((&mode, data)) = data.split_first() else { return };
     let target = Target { rows: 2, cols: 2, spacing: 0.05 };
-    let camera = |n: &str| CameraSpec { name: n.into(), width: 640, height: 480, model: "radial3".into() };
+    let camera = |n: &str| CameraSpec::new(n, 640, 480, LensModel::Radial3);
     let (cameras, patterns) = if mode % 2 == 0 {
         (vec![camera("cam0")], BTreeMap::new())
     } else {

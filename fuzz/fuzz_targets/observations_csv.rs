@@ -1,7 +1,7 @@
 #![no_main]
 //! The observations CSV parser never panics, and what it accepts is consistent.
 use deformcal::model::camera::CameraSpec;
-use deformcal::{Dataset, Target};
+use deformcal::{LensModel, Target};
 use libfuzzer_sys::fuzz_target;
 use std::path::Path;
 
@@ -9,7 +9,7 @@ fuzz_target!(|data: &[u8]| {
     let target = Target { rows: 4, cols: 5, spacing: 0.05 };
     let cameras: Vec<CameraSpec> = ["cam0", "cam1"]
         .iter()
-        .map(|n| CameraSpec { name: n.to_string(), width: 640, height: 480, model: "radial3".into() })
+        .map(|n| CameraSpec::new(*n, 640, 480, LensModel::Radial3))
         .collect();
     if let Ok(d) = deformcal::app::observations_csv::parse(data, Path::new("/fuzz/obs.csv"), target, cameras) {
         assert!(!d.observations.is_empty());
