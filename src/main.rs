@@ -91,7 +91,8 @@ struct ProtocolArgs {
     /// The TOML config (its [protocol] table, defaults otherwise).
     #[arg(long, short)]
     config: PathBuf,
-    /// Run only the i-th of N slices of the subset × method grid (e.g. 0/4).
+    /// Run only the i-th of N slices of the subset × method grid (e.g. 0/4), or
+    /// `auto`: from a Slurm job array or a Kubernetes Indexed Job's environment.
     #[arg(long)]
     shard: Option<String>,
     /// Worker threads (default: all cores).
@@ -438,13 +439,18 @@ fn run_protocol(args: ProtocolArgs) -> Result<()> {
     if let Some(o) = args.output {
         config.output_dir = o;
     }
-    let shard = match &args.shard {
-        Some(s) => Some(
-            Shard::parse(s)
-                .with_context(|| format!("--shard: `{s}` is not i/N with 0 <= i < N"))?,
-        ),
-        None => None,
-    };
+    let shard =
+        match args.shard.as_deref() {
+            Some("auto") => {
+                let (s, from) = Shard::from_env(|v| std::env::var(v).ok())?;
+                eprintln!("shard {}/{} (from {from})", s.index, s.count);
+                Some(s)
+            }
+            Some(s) => Some(Shard::parse(s).with_context(|| {
+                format!("--shard: `{s}` is not i/N with 0 <= i < N, nor `auto`")
+            })?),
+            None => None,
+        };
     // Shards of one run write side by side into one directory, each its own file;
     // the unsharded outputs are one set, staged and swapped in under the lock.
     let set = match shard {

@@ -329,3 +329,55 @@ fn cli_batch_writes_one_combined_report() {
         assert!(dir.path().join(name).join("mapping.svg").exists());
     }
 }
+
+#[test]
+fn shard_auto_reads_slurm_and_kubernetes_environments() {
+    let env = |pairs: &'static [(&'static str, &'static str)]| {
+        move |k: &str| {
+            pairs
+                .iter()
+                .find(|(n, _)| *n == k)
+                .map(|(_, v)| v.to_string())
+        }
+    };
+    // A Slurm array --array=4-7: task 6 is the third of four.
+    let slurm = env(&[
+        ("SLURM_ARRAY_TASK_ID", "6"),
+        ("SLURM_ARRAY_TASK_MIN", "4"),
+        ("SLURM_ARRAY_TASK_MAX", "7"),
+        ("SLURM_ARRAY_TASK_COUNT", "4"),
+    ]);
+    assert_eq!(
+        Shard::from_env(slurm).unwrap(),
+        (Shard { index: 2, count: 4 }, "SLURM_ARRAY_TASK_ID")
+    );
+    let k8s = env(&[
+        ("JOB_COMPLETION_INDEX", "1"),
+        ("DEFORMCAL_SHARD_COUNT", "3"),
+    ]);
+    assert_eq!(
+        Shard::from_env(k8s).unwrap(),
+        (Shard { index: 1, count: 3 }, "JOB_COMPLETION_INDEX")
+    );
+    let err = |e: deformcal::Error| e.to_string();
+    // --array=0-6:2 leaves gaps: refused, not silently unbalanced.
+    let stepped = env(&[
+        ("SLURM_ARRAY_TASK_ID", "2"),
+        ("SLURM_ARRAY_TASK_MIN", "0"),
+        ("SLURM_ARRAY_TASK_MAX", "6"),
+        ("SLURM_ARRAY_TASK_COUNT", "4"),
+        ("SLURM_ARRAY_TASK_STEP", "2"),
+    ]);
+    assert_eq!(
+        err(Shard::from_env(stepped).unwrap_err()),
+        "invalid argument: --shard auto: the Slurm array must be one contiguous range such as --array=0-3 (got tasks 0 to 6, step 2, 4 tasks)"
+    );
+    assert_eq!(
+        err(Shard::from_env(env(&[("JOB_COMPLETION_INDEX", "0")])).unwrap_err()),
+        "invalid argument: --shard auto: JOB_COMPLETION_INDEX is set (a Kubernetes Indexed Job) but DEFORMCAL_SHARD_COUNT is not; set it to the Job's completions"
+    );
+    assert_eq!(
+        err(Shard::from_env(env(&[])).unwrap_err()),
+        "invalid argument: --shard auto: neither SLURM_ARRAY_TASK_ID (a Slurm job array) nor JOB_COMPLETION_INDEX (a Kubernetes Indexed Job) is set; give --shard i/N instead"
+    );
+}

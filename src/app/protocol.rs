@@ -172,6 +172,66 @@ impl Shard {
         (count > 0 && index < count).then_some(Shard { index, count })
     }
 
+    /// `--shard auto`: the shard of a Slurm job array task (`SLURM_ARRAY_TASK_ID`,
+    /// `_MIN`, `_MAX`, `_COUNT`, `_STEP`) or of a Kubernetes Indexed Job
+    /// (`JOB_COMPLETION_INDEX`, with the Job's completions in `DEFORMCAL_SHARD_COUNT`).
+    /// `var` reads an environment variable; returns the shard and where it came from.
+    pub fn from_env(var: impl Fn(&str) -> Option<String>) -> Result<(Shard, &'static str)> {
+        let number = |name: &str| -> Result<Option<usize>> {
+            match var(name) {
+                None => Ok(None),
+                Some(v) => v.trim().parse().map(Some).map_err(|_| {
+                    Error::Invalid(format!("--shard auto: {name} is `{v}`, not a number"))
+                }),
+            }
+        };
+        if let Some(id) = number("SLURM_ARRAY_TASK_ID")? {
+            let min = number("SLURM_ARRAY_TASK_MIN")?.unwrap_or(0);
+            let count = number("SLURM_ARRAY_TASK_COUNT")?.ok_or_else(|| {
+                Error::Invalid(
+                    "--shard auto: SLURM_ARRAY_TASK_ID is set but SLURM_ARRAY_TASK_COUNT is not"
+                        .into(),
+                )
+            })?;
+            let max = number("SLURM_ARRAY_TASK_MAX")?.unwrap_or(min + count.max(1) - 1);
+            let step = number("SLURM_ARRAY_TASK_STEP")?.unwrap_or(1);
+            if step != 1 || max + 1 != min + count || id < min {
+                return Err(Error::Invalid(format!(
+                    "--shard auto: the Slurm array must be one contiguous range such as --array=0-{} \
+                     (got tasks {min} to {max}, step {step}, {count} tasks)",
+                    count.max(1) - 1
+                )));
+            }
+            return Ok((
+                Shard {
+                    index: id - min,
+                    count,
+                },
+                "SLURM_ARRAY_TASK_ID",
+            ));
+        }
+        if let Some(index) = number("JOB_COMPLETION_INDEX")? {
+            let count = number("DEFORMCAL_SHARD_COUNT")?.ok_or_else(|| {
+                Error::Invalid(
+                    "--shard auto: JOB_COMPLETION_INDEX is set (a Kubernetes Indexed Job) but DEFORMCAL_SHARD_COUNT is not; \
+                     set it to the Job's completions"
+                        .into(),
+                )
+            })?;
+            if index >= count {
+                return Err(Error::Invalid(format!(
+                    "--shard auto: JOB_COMPLETION_INDEX {index} is not below DEFORMCAL_SHARD_COUNT {count}"
+                )));
+            }
+            return Ok((Shard { index, count }, "JOB_COMPLETION_INDEX"));
+        }
+        Err(Error::Invalid(
+            "--shard auto: neither SLURM_ARRAY_TASK_ID (a Slurm job array) nor JOB_COMPLETION_INDEX \
+             (a Kubernetes Indexed Job) is set; give --shard i/N instead"
+                .into(),
+        ))
+    }
+
     /// Whether task `t` belongs to this shard (round robin, so shards stay balanced).
     pub fn owns(&self, t: usize) -> bool {
         t % self.count == self.index
