@@ -3,10 +3,13 @@
 pub mod calibration_json;
 pub mod capi;
 pub mod config;
+pub mod config_keys;
 pub mod corners_vnl;
 pub mod detect;
 pub mod exports;
 pub mod fsio;
+pub mod guard;
+pub mod lint;
 pub mod observations_csv;
 pub mod output;
 pub mod photos;
