@@ -598,9 +598,9 @@ impl Checker<'_> {
             DataSource::Observations(_)
             | DataSource::CornersVnl { .. }
             | DataSource::Photos { .. } => {
-                let t = raw
-                    .target
-                    .ok_or_else(|| self.err("missing table [target]".into()))?;
+                let t = raw.target.ok_or_else(|| {
+                    self.err("the config needs a `[target]` section (rows, cols, spacing)".into())
+                })?;
                 if raw.cameras.is_empty() {
                     return Err(
                         self.err("missing [[cameras]]: at least one camera is needed".into())

@@ -71,21 +71,20 @@ pub fn reasons(c: &Calibration, rules: Rules) -> Vec<String> {
     let rmse = c.rmse_px;
     let bound = rules.max_rmse_px.unwrap_or(MAX_RMSE_PX);
     if rmse.is_nan() || rmse > bound {
-        let why = match rules.max_rmse_px {
-            Some(_) => "calibration.max_rmse_px".to_string(),
-            None => "what a calibration gives (0.1–1 px)".to_string(),
-        };
-        out.push(format!(
-            "its RMSE {rmse:.3} px is above {bound} px, far above {why}"
-        ));
+        out.push(match rules.max_rmse_px {
+            Some(_) => format!("its RMSE {rmse:.3} px is above calibration.max_rmse_px = {bound} px"),
+            None => format!(
+                "its RMSE {rmse:.3} px is above {bound} px, far more than a calibration gives (0.1–1 px)"
+            ),
+        });
     } else if rules.max_rmse_px.is_none() && rmse > NOISE_RULE_FLOOR_PX {
         if let Some(t) = c.trust(c.detector_noise_px) {
             let floor = std::f64::consts::SQRT_2 * t.noise_px;
             if rmse > NOISE_FACTOR * floor {
                 out.push(format!(
                     "its RMSE {rmse:.3} px is {:.0} times the {floor:.3} px that the corners' noise \
-                     (σ̂ = {:.3} px) explains; a model that fits the data gives about 1 time, \
-                     this one cannot describe them",
+                     (σ̂ = {:.3} px) explains: the model cannot describe the data (one that can \
+                     gives about 1 time)",
                     rmse / floor,
                     t.noise_px
                 ));
