@@ -60,7 +60,10 @@ fn check(printed: &str) {
     );
     assert!(printed.contains("calibrate_ex_no_frames rc=0"), "{printed}");
     assert!(printed.contains("calibrate_ex rc=0"), "{printed}");
-    assert!(printed.contains("frames_used 8 of 8 frame0 0 rmse 0."), "{printed}");
+    assert!(
+        printed.contains("frames_used 8 of 8 frame0 0 rmse 0."),
+        "{printed}"
+    );
 }
 
 #[test]

@@ -40,17 +40,15 @@ fn close(a: f64, b: f64, what: &str) {
     );
 }
 
-#[test]
-fn cpp_example_reads_a_csv_and_matches_the_cli_frame_by_frame() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+/// Builds the shared library and compiles the example against it.
+fn build_example(root: &Path, dir: &Path) -> std::path::PathBuf {
     // The shared library is a build artefact of `cargo build`, not of `cargo test`.
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     run(Command::new(cargo)
         .current_dir(root)
         .args(["build", "--release", "--lib", "--quiet"]));
     let lib_dir = root.join("target/release");
-    let dir = tempfile::tempdir().unwrap();
-    let exe = dir.path().join("calibrate");
+    let exe = dir.join("calibrate");
     run(Command::new("g++")
         .args(["-std=c++17", "-Wall", "-Wextra", "-Werror"])
         .arg(root.join("examples/cpp/calibrate.cpp"))
@@ -60,6 +58,49 @@ fn cpp_example_reads_a_csv_and_matches_the_cli_frame_by_frame() {
         .arg(format!("-Wl,-rpath,{}", lib_dir.display()))
         .arg("-o")
         .arg(&exe));
+    exe
+}
+
+/// One printed frame line against the frame of calibration.json.
+fn same_frame(line: &str, f: &serde_json::Value) {
+    assert!(line.contains("used 1"), "{line}");
+    close(
+        value(line, "rmse_px"),
+        f["rmse_px"].as_f64().unwrap(),
+        "frame rmse",
+    );
+    close(
+        value(line, "observations"),
+        f["observations"].as_f64().unwrap(),
+        "count",
+    );
+    let d = &f["deformation"];
+    let bend = ["a", "b", "c"].map(|k| d[k].as_f64().unwrap());
+    for (name, cpp, cli) in [
+        ("rotation", triple(line, "rotation"), f["rotation"].clone()),
+        (
+            "translation",
+            triple(line, "translation"),
+            f["translation"].clone(),
+        ),
+        ("bend", triple(line, "bend"), serde_json::json!(bend)),
+    ] {
+        for i in 0..3 {
+            close(cpp[i], cli[i].as_f64().unwrap(), name);
+        }
+    }
+    close(
+        value(line, "max_out_of_plane_m"),
+        f["max_out_of_plane_m"].as_f64().unwrap(),
+        "max_out_of_plane_m",
+    );
+}
+
+#[test]
+fn cpp_example_reads_a_csv_and_matches_the_cli_frame_by_frame() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let dir = tempfile::tempdir().unwrap();
+    let exe = build_example(root, dir.path());
     let bin = env!("CARGO_BIN_EXE_deformcal");
     let data = dir.path().join("t2");
     run(Command::new(bin)
@@ -104,45 +145,11 @@ fn cpp_example_reads_a_csv_and_matches_the_cli_frame_by_frame() {
         .filter(|l| l.starts_with("frame "))
         .collect();
     let cli_frames = json["frames"].as_array().unwrap();
-    assert_eq!(frames.len(), 26, "{printed}");
-    assert_eq!(cli_frames.len(), 25);
+    assert_eq!((frames.len(), cli_frames.len()), (26, 25), "{printed}");
     for f in cli_frames {
         let id = f["frame"].as_i64().unwrap();
-        let line = frames
-            .iter()
-            .find(|l| l.starts_with(&format!("frame {id} ")))
-            .unwrap();
-        assert!(line.contains("used 1"), "{line}");
-        close(
-            value(line, "rmse_px"),
-            f["rmse_px"].as_f64().unwrap(),
-            "frame rmse",
-        );
-        close(
-            value(line, "observations"),
-            f["observations"].as_f64().unwrap(),
-            "count",
-        );
-        let d = &f["deformation"];
-        let bend = ["a", "b", "c"].map(|k| d[k].as_f64().unwrap());
-        for (name, cpp, cli) in [
-            ("rotation", triple(line, "rotation"), f["rotation"].clone()),
-            (
-                "translation",
-                triple(line, "translation"),
-                f["translation"].clone(),
-            ),
-            ("bend", triple(line, "bend"), serde_json::json!(bend)),
-        ] {
-            for i in 0..3 {
-                close(cpp[i], cli[i].as_f64().unwrap(), name);
-            }
-        }
-        close(
-            value(line, "max_out_of_plane_m"),
-            f["max_out_of_plane_m"].as_f64().unwrap(),
-            "max_out_of_plane_m",
-        );
+        let prefix = format!("frame {id} ");
+        same_frame(frames.iter().find(|l| l.starts_with(&prefix)).unwrap(), f);
     }
     let dropped = frames.iter().find(|l| l.starts_with("frame 999 ")).unwrap();
     assert!(

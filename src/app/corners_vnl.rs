@@ -290,6 +290,9 @@ fn group_rows(text: &str, path: &Path) -> Result<Vec<(String, Vec<Corner>)>> {
     Ok(images)
 }
 
+/// An image's camera, frame number and file name.
+pub type ImageName = (usize, i64, String);
+
 /// An image's camera, time-step key, corners and file name.
 type Keyed = (usize, String, Vec<Corner>, String);
 
@@ -344,7 +347,7 @@ fn assemble(
     path: &Path,
     target: Target,
     cameras: Vec<CameraSpec>,
-) -> Result<(Dataset, Vec<(usize, i64, String)>)> {
+) -> Result<(Dataset, Vec<ImageName>)> {
     let keys: BTreeSet<&String> = keyed.iter().map(|(_, k, _, _)| k).collect();
     let frame_of: BTreeMap<&String, i64> = keys
         .into_iter()
@@ -378,7 +381,7 @@ fn assemble(
 pub struct Table {
     pub dataset: Dataset,
     pub without_board: usize,
-    pub files: Vec<(usize, i64, String)>,
+    pub files: Vec<ImageName>,
 }
 
 /// Reads a `corners.vnl` (SPEC §5): one row per corner, `filename x y [level|weight]`,
