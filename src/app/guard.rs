@@ -111,9 +111,8 @@ pub fn judge(
     if let Some(h) = iterations_hint(c, request) {
         hints.push(h);
     }
-    let many_rejected = c.rejected.len() as f64
-        > MAX_REJECTED_SHARE * (c.rejected.len() + c.dataset.observations.len()) as f64;
-    if c.rmse_px.is_nan() || c.rmse_px > NOISE_RULE_FLOOR_PX || many_rejected {
+    // A rule on the data broke (not only convergence): look for the likely mistake.
+    if reasons.len() > usize::from(!c.converged) {
         hints.extend(swapped_hint(input, request, c.rmse_px, rules));
         hints.extend(lens_hint(input, request, c.rmse_px, rules));
         hints.extend(worst_frames_hint(c, files));
