@@ -416,6 +416,10 @@ fn unknown_and_missing_keys_are_named_with_section_line_and_suggestion() {
         config_error(d, &format!("{cam}{data}")),
         "the config needs a `[target]` section (rows, cols, spacing)"
     );
+    assert_eq!(
+        config_error(d, &format!("{board}{cam}{data}[calibration]\nloss = \"cauchi\"\n")),
+        "line 12: in [calibration]: unknown variant `cauchi`, expected `none` or `cauchy`; did you mean `cauchy`?"
+    );
 }
 
 #[test]

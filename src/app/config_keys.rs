@@ -124,12 +124,21 @@ pub fn explain(text: &str, message: &str, span: Option<std::ops::Range<usize>>) 
             _ => format!("the config needs a `[{key}]` section"),
         };
     }
+    // A misspelt value of a closed set (a method, a loss) gets a suggestion too.
+    let suggestion = match quoted(&message) {
+        Some(v) if message.starts_with("unknown variant") => {
+            did_you_mean(&v, &expected_names(&message))
+                .map(|k| format!("; did you mean `{k}`?"))
+                .unwrap_or_default()
+        }
+        _ => String::new(),
+    };
     match &section {
         Some(_) => format!(
-            "line {line}: in {}: {message}",
+            "line {line}: in {}: {message}{suggestion}",
             section_name(&section, false)
         ),
-        None => format!("line {line}: {message}"),
+        None => format!("line {line}: {message}{suggestion}"),
     }
 }
 
