@@ -133,8 +133,8 @@ pub fn error_hints(input: &Dataset, request: &Request, rules: Rules) -> Vec<Stri
 /// When the solve ran out of iterations: say so and how to give it more.
 fn iterations_hint(c: &Calibration, request: &Request) -> Option<String> {
     let last = c.stages.last()?;
-    let max = request.settings.max_iterations as i32;
-    (!c.converged && last.iterations >= max).then(|| {
+    let max = request.settings.max_iterations;
+    (!c.converged && i64::from(last.iterations) >= i64::from(max)).then(|| {
         format!(
             "the solve stopped at calibration.max_iterations = {max}; if the RMSE is fine, raise it \
              (or loosen function_tolerance / parameter_tolerance)"
