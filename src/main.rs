@@ -4,7 +4,7 @@ use clap::{Args, Parser, Subcommand};
 use deformcal::app::config::Config;
 use deformcal::app::fsio::{self, OutputSet};
 use deformcal::app::protocol::{self, Shard};
-use deformcal::app::{output, report};
+use deformcal::app::{guard, lint, output, report};
 use deformcal::model::selection::{AutoSettings, MethodChoice};
 use deformcal::model::synthetic::{Generator, Preset, MAX_IMAGES};
 use deformcal::solver::problem::SolverSettings;
@@ -25,7 +25,7 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
-    /// Calibrate as the config says (the default command).
+    /// Calibrate once, even when the config has a [protocol] section.
     Calibrate(CalibrateArgs),
     /// Write a built-in synthetic dataset as observations.csv plus truth.json.
     Generate(GenerateArgs),
@@ -170,50 +170,136 @@ struct GenerateArgs {
     model: String,
 }
 
-fn run_calibrate(args: CalibrateArgs) -> Result<()> {
+/// A calibration that ran but failed its guard rails (exit code [`EXIT_FAILED`]).
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+struct GuardFailed(String);
+
+/// The exit code of a calibration that failed its guard rails: its files were
+/// written under `FAILED-` names. (1 is any other error, 2 a command-line error.)
+const EXIT_FAILED: u8 = 3;
+
+/// The config with the command line's overrides applied.
+fn calibrate_config(args: &CalibrateArgs) -> Result<Config> {
     let path = args
         .config
+        .as_ref()
         .context("no config given: use --config FILE (see configs/ for examples)")?;
-    let mut config = Config::load(&path)?;
+    let mut config = Config::load(path)?;
     if let Some(m) = &args.method {
         config.calibration.method = MethodChoice::parse(m).with_context(|| {
             format!("--method: unknown method `{m}` (standard, static, dynamic, full, auto)")
         })?;
     }
-    if let Some(o) = args.output {
-        config.output_dir = o;
+    if let Some(o) = &args.output {
+        config.output_dir = o.clone();
     }
     if let Some(t) = args.threads {
         anyhow::ensure!((1..=256).contains(&t), "--threads must be 1 to 256");
         config.calibration.threads = t;
     }
+    Ok(config)
+}
+
+/// The default command: the protocol when the config has `[protocol]` (SPEC §5),
+/// else one calibration.
+fn run_default(args: CalibrateArgs) -> Result<()> {
+    let Some(path) = args.config.clone() else {
+        return run_calibrate(args);
+    };
+    if Config::load(&path)?.protocol.is_none() {
+        return run_calibrate(args);
+    }
+    anyhow::ensure!(
+        args.method.is_none(),
+        "{}: --method applies to one calibration, but the config has a [protocol] section, which runs \
+         its `methods`; to calibrate once use `deformcal calibrate --config {}`",
+        path.display(),
+        path.display()
+    );
+    eprintln!(
+        "{}: the config has a [protocol] section: running the evaluation protocol \
+         (`deformcal calibrate --config …` calibrates once instead)",
+        path.display()
+    );
+    run_protocol(ProtocolArgs {
+        config: path,
+        shard: None,
+        threads: args.threads,
+        subsets: None,
+        output: args.output,
+    })
+}
+
+fn run_calibrate(args: CalibrateArgs) -> Result<()> {
+    let config = calibrate_config(&args)?;
     // Lock and stage the output before the work: a busy or unwritable output
     // directory fails now, not after a long solve.
     let set = OutputSet::begin(&config.output_dir, fsio::calibration_files())?;
-    let (dataset, _truth) = deformcal::app::source::load_data(&config)?;
-    let mut result = run_method(&config, &dataset)?;
+    let loaded = deformcal::app::source::load(&config)?;
+    let rules = guard::Rules {
+        max_rmse_px: config.calibration.max_rmse_px,
+    };
+    let first = match config.calibration.method {
+        MethodChoice::Fixed(m) => m,
+        MethodChoice::Auto => Method::Standard,
+    };
+    let mut result = run_method(&config, &loaded.dataset).inspect_err(|_| {
+        for h in guard::error_hints(&loaded.dataset, &request_of(&config, first), rules) {
+            eprintln!("hint: {h}");
+        }
+    })?;
+    // Judged as the method that ran (with `auto`, the one chosen).
+    let request = request_of(&config, result.method);
     result.detector_noise_px = config.calibration.detector_noise_px;
-    let written = output::write_calibration(set.path(), &result)?;
+    // The summary's own warnings go to stdout; these go to stderr, and all to the JSON.
+    let summary = report::summary(&result);
+    let mut warnings = loaded.warnings.clone();
+    warnings.extend(lint::flipped_frames(&result, &loaded.files));
+    result.warnings.extend(warnings.iter().cloned());
+    let failure = guard::judge(&loaded.dataset, &request, &result, rules, &loaded.files);
+    let written = match &failure {
+        None => output::write_calibration(set.path(), &result)?.warnings,
+        Some(f) => {
+            output::write_failed(set.path(), &result, f)?;
+            Vec::new()
+        }
+    };
     set.commit()?;
-    print!("{}", report::summary(&result));
-    for w in &written.warnings {
+    print!("{summary}");
+    for w in warnings.iter().chain(&written) {
         eprintln!("warning: {w}");
     }
-    println!(
-        "  wrote {}",
-        config.output_dir.join("calibration.json").display()
-    );
-    Ok(())
+    let Some(failure) = failure else {
+        let path = config.output_dir.join("calibration.json");
+        println!("  wrote {}", path.display());
+        return Ok(());
+    };
+    for h in &failure.hints {
+        eprintln!("hint: {h}");
+    }
+    Err(GuardFailed(format!(
+        "the calibration FAILED: {}; wrote {} and {} (no model files)",
+        failure.reasons.join("; "),
+        config.output_dir.join(fsio::FAILED_CALIBRATION).display(),
+        fsio::FAILED_OUTLIERS
+    ))
+    .into())
+}
+
+/// The config's request for one method.
+fn request_of(config: &Config, method: Method) -> Request {
+    Request {
+        method,
+        settings: SolverSettings::from(&config.calibration),
+        gauge: config.calibration.gauge_corners.clone(),
+    }
 }
 
 /// One calibration with the config's method, or `auto`'s choice with a progress bar.
 fn run_method(config: &Config, dataset: &deformcal::Dataset) -> Result<deformcal::Calibration> {
     let c = &config.calibration;
-    let request = |method| Request {
-        method,
-        settings: SolverSettings::from(c),
-        gauge: c.gauge_corners.clone(),
-    };
+    let request = |method| request_of(config, method);
     match c.method {
         MethodChoice::Fixed(m) => Ok(calibrate(dataset, &request(m))?),
         MethodChoice::Auto => {
@@ -377,6 +463,9 @@ fn protocol_rows(
     );
     let setup =
         protocol::prepare(config, &p).with_context(|| format!("{}", config.path.display()))?;
+    for w in &setup.warnings {
+        eprintln!("warning: {}: {w}", config.path.display());
+    }
     let tasks = (0..setup.header.tasks())
         .filter(|&t| shard.is_none_or(|s| s.owns(t)))
         .count();
@@ -613,13 +702,17 @@ fn main() -> ExitCode {
         Some(Command::Batch(a)) => run_batch(a),
         Some(Command::Detect(a)) => run_detect(a),
         Some(Command::Compare(a)) => run_compare(a),
-        None => run_calibrate(cli.calibrate),
+        None => run_default(cli.calibrate),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {}", brief(&format!("{e:#}")));
-            ExitCode::FAILURE
+            if e.downcast_ref::<GuardFailed>().is_some() {
+                ExitCode::from(EXIT_FAILED)
+            } else {
+                ExitCode::FAILURE
+            }
         }
     }
 }

@@ -1,5 +1,6 @@
 //! The C API on issue 19's bad calls: each returns non-zero with its message, none
-//! aborts, and a calibration still works; run natively and, when valgrind is
+//! aborts, and a calibration still works; `deformcal_calibrate_ex`'s tolerances,
+//! frame results and guard rails (code 4); run natively and, when valgrind is
 //! installed (CI installs it), under valgrind with memory errors fatal.
 use std::path::Path;
 use std::process::Command;
@@ -23,6 +24,18 @@ fn check(printed: &str) {
         ),
         ("scale_nan", "options.loss_scale_px is NaN"),
         ("scale_huge", "options.loss_scale_px is 1000000000"),
+        (
+            "tolerance_negative",
+            "tolerances.function_tolerance is -1; use a non-negative number, or 0 for the default",
+        ),
+        (
+            "max_rmse_nan",
+            "tolerances.max_rmse_px is NaN; use a positive number of pixels, or 0 for the default rules",
+        ),
+        (
+            "frames_small",
+            "frame_results holds 2 entries; 8 needed (one per frame number)",
+        ),
     ] {
         let line = printed
             .lines()
@@ -32,6 +45,25 @@ fn check(printed: &str) {
     }
     assert!(printed.contains("calibrate rc=0"), "{printed}");
     assert!(printed.contains("fx "), "{printed}");
+    // The count is given even when the room is too small.
+    assert!(printed.contains("num_frames 8\n"), "{printed}");
+    // A result that fails the guard rails is code 4, filled in for inspection.
+    assert!(
+        printed.contains(
+            "not_converged rc=4 msg=the calibration FAILED: the standard solve did not converge after 1 iterations"
+        ),
+        "{printed}"
+    );
+    assert!(
+        printed.contains("not_converged converged 0 fx_filled 1 frame_used 1"),
+        "{printed}"
+    );
+    assert!(printed.contains("calibrate_ex_no_frames rc=0"), "{printed}");
+    assert!(printed.contains("calibrate_ex rc=0"), "{printed}");
+    assert!(
+        printed.contains("frames_used 8 of 8 frame0 0 rmse 0."),
+        "{printed}"
+    );
 }
 
 #[test]

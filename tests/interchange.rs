@@ -103,7 +103,7 @@ fn opencv_and_mrcal_read_our_models_and_project_like_us() {
         }
         assert_eq!(t["width"].as_f64().unwrap(), cam.width as f64);
         assert_eq!(t["imagersize"][1].as_u64().unwrap(), cam.height as u64);
-        assert!((t["rms"].as_f64().unwrap() - json.rmse_px).abs() < 1e-12);
+        assert!((t["rms"].as_f64().unwrap() - cam.rmse_px.unwrap()).abs() < 1e-12);
         let rt: Vec<f64> = t["rt_cam_ref"]
             .as_array()
             .unwrap()

@@ -22,6 +22,9 @@ pub struct CameraJson {
     pub intrinsics: Intrinsics,
     pub rotation: [f64; 3],
     pub translation: [f64; 3],
+    /// This camera's RMSE over its own observations (SPEC §3's `rmse_px`, per camera).
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub rmse_px: Option<f64>,
 }
 
 impl CalibrationJson {
@@ -114,6 +117,10 @@ pub struct CalibrationJson {
     /// With `method = "auto"`: every candidate's figures and why `method` was chosen.
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub auto: Option<Selection>,
+    /// Why the calibration failed its guard rails; such a file is written as
+    /// `FAILED-calibration.json` and its models are not exported.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub failure: Option<crate::app::guard::Failure>,
 }
 
 /// A solver stage in `calibration.json`.
@@ -150,11 +157,14 @@ impl From<&Stage> for StageJson {
 impl From<&Calibration> for CalibrationJson {
     fn from(c: &Calibration) -> Self {
         let d = &c.dataset;
-        let mut sq = vec![0.0; d.num_frames()];
-        let mut n = vec![0usize; d.num_frames()];
+        let (mut sq, mut n) = (vec![0.0; d.num_frames()], vec![0usize; d.num_frames()]);
+        let (mut cam_sq, mut cam_n) = (vec![0.0; d.cameras.len()], vec![0usize; d.cameras.len()]);
         for (o, r) in d.observations.iter().zip(c.residuals.chunks(2)) {
-            sq[o.frame] += r[0] * r[0] + r[1] * r[1];
+            let e = r[0] * r[0] + r[1] * r[1];
+            sq[o.frame] += e;
             n[o.frame] += 1;
+            cam_sq[o.camera] += e;
+            cam_n[o.camera] += 1;
         }
         let bends = c.method.has_paraboloid();
         let trust = c.trust(c.detector_noise_px);
@@ -183,6 +193,7 @@ impl From<&Calibration> for CalibrationJson {
                     intrinsics: c.state.intrinsics[k],
                     rotation: c.state.camera_poses[k].rotation,
                     translation: c.state.camera_poses[k].translation,
+                    rmse_px: (cam_n[k] > 0).then(|| (cam_sq[k] / cam_n[k] as f64).sqrt()),
                 })
                 .collect(),
             frames: (0..d.num_frames())
@@ -214,6 +225,7 @@ impl From<&Calibration> for CalibrationJson {
             stages: c.stages.iter().map(StageJson::from).collect(),
             warnings: c.warnings.clone(),
             auto: c.selection.clone(),
+            failure: None,
         }
     }
 }

@@ -1,7 +1,9 @@
 //! The C interface of libdeformcal (`include/deformcal.h`): calibrate from in-memory
-//! observations without files. Panics and errors become a non-zero return and a message.
+//! observations without files, with per-frame results and the same guard rails as
+//! the command line. Panics and errors become a non-zero return and a message.
 #![allow(unsafe_code)]
 use crate::app::config::{short, LOSS_SCALE_RANGE, MAX_CAMERAS, MAX_CORNERS};
+use crate::app::guard::{self, Rules};
 use crate::model::camera::CameraSpec;
 use crate::model::lens::{LensModel, MAX_PARAMS};
 use crate::model::synthetic::{Generator, Preset, MAX_IMAGES};
@@ -74,6 +76,30 @@ pub struct DcResult {
     pub max_out_of_plane_m: f64,
 }
 
+/// `DcTolerances`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default)]
+pub struct DcTolerances {
+    pub function_tolerance: f64,
+    pub parameter_tolerance: f64,
+    pub gradient_tolerance: f64,
+    pub max_rmse_px: f64,
+}
+
+/// `DcFrameResult`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default)]
+pub struct DcFrameResult {
+    pub frame: i64,
+    pub used: i32,
+    pub rotation: [f64; 3],
+    pub translation: [f64; 3],
+    pub bend: [f64; 3],
+    pub max_out_of_plane_m: f64,
+    pub rmse_px: f64,
+    pub observations: u64,
+}
+
 /// Why a C API call failed; its code is the function's return value.
 #[derive(Debug, thiserror::Error)]
 enum CError {
@@ -86,6 +112,9 @@ enum CError {
     /// A bug: a panic caught at the boundary.
     #[error("internal error (panic) in deformcal")]
     Panic,
+    /// The calibration ran but failed its guard rails; the results are filled in.
+    #[error("{0}")]
+    Failed(String),
 }
 
 impl CError {
@@ -95,6 +124,7 @@ impl CError {
             CError::Argument(_) => 1,
             CError::Calibration(_) => 2,
             CError::Panic => 3,
+            CError::Failed(_) => 4,
         }
     }
 }
@@ -173,6 +203,46 @@ fn settings_from(o: &DcOptions) -> Result<SolverSettings, String> {
         }
     }
     Ok(settings)
+}
+
+/// Applies `DcTolerances` to the settings: 0 keeps the default, a negative or
+/// non-finite value is refused; returns the guard's rules.
+fn apply_tolerances(t: &DcTolerances, settings: &mut SolverSettings) -> Result<Rules, String> {
+    for (name, v, slot) in [
+        (
+            "function_tolerance",
+            t.function_tolerance,
+            &mut settings.function_tolerance,
+        ),
+        (
+            "parameter_tolerance",
+            t.parameter_tolerance,
+            &mut settings.parameter_tolerance,
+        ),
+        (
+            "gradient_tolerance",
+            t.gradient_tolerance,
+            &mut settings.gradient_tolerance,
+        ),
+    ] {
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(format!(
+                "tolerances.{name} is {v}; use a non-negative number, or 0 for the default"
+            ));
+        }
+        if v > 0.0 {
+            *slot = v;
+        }
+    }
+    let m = t.max_rmse_px;
+    if !(m.is_finite() && m >= 0.0) {
+        return Err(format!(
+            "tolerances.max_rmse_px is {m}; use a positive number of pixels, or 0 for the default rules"
+        ));
+    }
+    Ok(Rules {
+        max_rmse_px: (m > 0.0).then_some(m),
+    })
 }
 
 /// # Safety
@@ -367,6 +437,122 @@ unsafe fn write_results(
     Ok(())
 }
 
+/// One entry per frame number of the input, ascending: the calibrated pose, bend
+/// and RMSE of each frame kept, `used = 0` for a frame the calibration dropped.
+fn frame_results(input: &Dataset, c: &crate::Calibration) -> Vec<DcFrameResult> {
+    let d = &c.dataset;
+    let mut sq = vec![0.0; d.num_frames()];
+    let mut n = vec![0u64; d.num_frames()];
+    for (o, r) in d.observations.iter().zip(c.residuals.chunks(2)) {
+        sq[o.frame] += r[0] * r[0] + r[1] * r[1];
+        n[o.frame] += 1;
+    }
+    let bends = c.method.has_paraboloid();
+    input
+        .frame_ids
+        .iter()
+        .map(|&id| {
+            let Ok(j) = d.frame_ids.binary_search(&id) else {
+                return DcFrameResult {
+                    frame: id,
+                    rmse_px: f64::NAN,
+                    ..DcFrameResult::default()
+                };
+            };
+            let pose = c.state.frame_poses[j];
+            let b = if bends {
+                c.state.deformations[j]
+            } else {
+                crate::Paraboloid::default()
+            };
+            DcFrameResult {
+                frame: id,
+                used: 1,
+                rotation: pose.rotation,
+                translation: pose.translation,
+                bend: [b.a, b.b, b.c],
+                max_out_of_plane_m: b.max_out_of_plane(&d.target),
+                rmse_px: if n[j] > 0 {
+                    (sq[j] / n[j] as f64).sqrt()
+                } else {
+                    f64::NAN
+                },
+                observations: n[j],
+            }
+        })
+        .collect()
+}
+
+/// Where `deformcal_calibrate_ex` puts the per-frame results.
+struct FrameOut {
+    results: *mut DcFrameResult,
+    capacity: usize,
+    count: *mut usize,
+}
+
+/// The shared body of both calibrate calls: checks, calibrates, writes every
+/// result, then holds the result to the guard rails (code 4 when it fails them).
+///
+/// # Safety
+/// As for [`deformcal_calibrate_ex`].
+#[allow(clippy::too_many_arguments)] // the C call's own arguments, passed through
+unsafe fn calibrate_into(
+    target: *const DcTarget,
+    cameras: *const DcCamera,
+    num_cameras: usize,
+    observations: *const DcObservation,
+    num_observations: usize,
+    options: *const DcOptions,
+    tolerances: *const DcTolerances,
+    result: *mut DcResult,
+    camera_results: *mut DcCameraResult,
+    frames: FrameOut,
+) -> Result<(), CError> {
+    // Outputs are checked before the work, not after a long solve.
+    if result.is_null() {
+        return Err("result is NULL".into());
+    }
+    if camera_results.is_null() {
+        return Err("camera_results is NULL".into());
+    }
+    let target = target_from(target)?;
+    let specs = camera_specs(cameras, num_cameras)?;
+    let dataset = dataset_from(target, specs, observations, num_observations)?;
+    let mut request = request_from(options)?;
+    let rules = match tolerances.as_ref() {
+        Some(t) => apply_tolerances(t, &mut request.settings)?,
+        None => Rules { max_rmse_px: None },
+    };
+    let needed = dataset.num_frames();
+    if let Some(count) = frames.count.as_mut() {
+        *count = needed;
+    }
+    if !frames.results.is_null() && frames.capacity < needed {
+        return Err(format!(
+            "frame_results holds {} entries; {needed} needed (one per frame number)",
+            frames.capacity
+        )
+        .into());
+    }
+    let c = calibrate(&dataset, &request)?;
+    write_results(&c, result, camera_results, num_cameras)?;
+    if !frames.results.is_null() {
+        for (i, f) in frame_results(&dataset, &c).into_iter().enumerate() {
+            *frames.results.add(i) = f;
+        }
+    }
+    match guard::judge(&dataset, &request, &c, rules, &Default::default()) {
+        None => Ok(()),
+        Some(f) => {
+            let mut message = format!("the calibration FAILED: {}", f.reasons.join("; "));
+            for h in &f.hints {
+                message.push_str(&format!("; hint: {h}"));
+            }
+            Err(CError::Failed(message))
+        }
+    }
+}
+
 /// Calibrates from in-memory observations; see `include/deformcal.h`.
 ///
 /// # Safety
@@ -385,20 +571,67 @@ pub unsafe extern "C" fn deformcal_calibrate(
     error: *mut c_char,
     error_len: usize,
 ) -> i32 {
+    let frames = FrameOut {
+        results: std::ptr::null_mut(),
+        capacity: 0,
+        count: std::ptr::null_mut(),
+    };
     guarded(error, error_len, || {
-        // Outputs are checked before the work, not after a long solve.
-        if result.is_null() {
-            return Err("result is NULL".into());
-        }
-        if camera_results.is_null() {
-            return Err("camera_results is NULL".into());
-        }
-        let target = target_from(target)?;
-        let specs = camera_specs(cameras, num_cameras)?;
-        let dataset = dataset_from(target, specs, observations, num_observations)?;
-        let request = request_from(options)?;
-        let c = calibrate(&dataset, &request)?;
-        write_results(&c, result, camera_results, num_cameras)
+        calibrate_into(
+            target,
+            cameras,
+            num_cameras,
+            observations,
+            num_observations,
+            options,
+            std::ptr::null(),
+            result,
+            camera_results,
+            frames,
+        )
+    })
+}
+
+/// Calibrates with tolerances and per-frame results; see `include/deformcal.h`.
+///
+/// # Safety
+/// As [`deformcal_calibrate`]; `tolerances` is null or valid, `frame_results` is
+/// null or holds `frame_capacity` entries, `num_frames` is null or valid.
+#[no_mangle]
+pub unsafe extern "C" fn deformcal_calibrate_ex(
+    target: *const DcTarget,
+    cameras: *const DcCamera,
+    num_cameras: usize,
+    observations: *const DcObservation,
+    num_observations: usize,
+    options: *const DcOptions,
+    tolerances: *const DcTolerances,
+    result: *mut DcResult,
+    camera_results: *mut DcCameraResult,
+    frame_results: *mut DcFrameResult,
+    frame_capacity: usize,
+    num_frames: *mut usize,
+    error: *mut c_char,
+    error_len: usize,
+) -> i32 {
+    let frames = FrameOut {
+        results: frame_results,
+        capacity: frame_capacity,
+        count: num_frames,
+    };
+    guarded(error, error_len, || {
+        calibrate_into(
+            target,
+            cameras,
+            num_cameras,
+            observations,
+            num_observations,
+            options,
+            tolerances,
+            result,
+            camera_results,
+            frames,
+        )
     })
 }
 

@@ -41,6 +41,9 @@ pub struct CalibrationConfig {
     /// The detector's noise per image coordinate, pixels, for the bias ratio and
     /// G-AIC; without it the noise is estimated from the residuals.
     pub detector_noise_px: Option<f64>,
+    /// The largest RMSE a result may have, pixels; replaces the default guard
+    /// rails on the RMSE (`app::guard`).
+    pub max_rmse_px: Option<f64>,
 }
 
 impl Default for CalibrationConfig {
@@ -64,6 +67,7 @@ impl Default for CalibrationConfig {
             verbose: s.verbose,
             outlier_k: s.outlier_k,
             detector_noise_px: None,
+            max_rmse_px: None,
         }
     }
 }
@@ -224,10 +228,6 @@ pub struct Config {
 /// Seed of synthetic data when the config gives none.
 pub const DEFAULT_SYNTHETIC_SEED: u64 = 1;
 
-fn line_of(text: &str, offset: usize) -> usize {
-    text[..offset.min(text.len())].matches('\n').count() + 1
-}
-
 impl Config {
     /// Reads and checks a config file.
     pub fn load(path: &Path) -> Result<Config> {
@@ -241,22 +241,9 @@ impl Config {
 
     /// Parses config text; `path` names the file in messages and anchors relative paths.
     pub fn parse(text: &str, path: &Path) -> Result<Config> {
-        let raw: RawConfig = toml::from_str(text).map_err(|e| {
-            let message = e
-                .message()
-                .trim()
-                .lines()
-                .map(str::trim)
-                .collect::<Vec<_>>()
-                .join("; ");
-            let message = match e.span() {
-                Some(span) => format!("line {}: {}", line_of(text, span.start), message),
-                None => message,
-            };
-            Error::Config {
-                path: path.into(),
-                message,
-            }
+        let raw: RawConfig = toml::from_str(text).map_err(|e| Error::Config {
+            path: path.into(),
+            message: crate::app::config_keys::explain(text, e.message(), e.span()),
         })?;
         let base = path.parent().unwrap_or(Path::new("")).to_path_buf();
         Checker { path, base, text }.check(raw)
@@ -276,12 +263,7 @@ fn key_line(text: &str, table: &str, index: usize, key: &str) -> Option<usize> {
     let mut seen: BTreeMap<String, usize> = BTreeMap::new();
     for (n, line) in text.lines().enumerate() {
         let t = line.trim();
-        let header = t
-            .strip_prefix("[[")
-            .and_then(|r| r.split("]]").next())
-            .or_else(|| t.strip_prefix('[').and_then(|r| r.split(']').next()));
-        if let Some(h) = header {
-            let h = h.trim().to_string();
+        if let Some((h, _)) = crate::app::config_keys::header(t) {
             let count = seen.entry(h.clone()).or_insert(0);
             current = Some((h.clone(), *count));
             *count += 1;
@@ -682,9 +664,9 @@ impl Checker<'_> {
             DataSource::Observations(_)
             | DataSource::CornersVnl { .. }
             | DataSource::Photos { .. } => {
-                let t = raw
-                    .target
-                    .ok_or_else(|| self.err("missing table [target]".into()))?;
+                let t = raw.target.ok_or_else(|| {
+                    self.err("the config needs a `[target]` section (rows, cols, spacing)".into())
+                })?;
                 if raw.cameras.is_empty() {
                     return Err(
                         self.err("missing [[cameras]]: at least one camera is needed".into())
@@ -816,6 +798,13 @@ impl Checker<'_> {
             if !(n.is_finite() && n > 0.0 && n <= 100.0) {
                 return Err(self.err(format!(
                     "calibration.detector_noise_px must be a positive number of pixels, at most 100 (got {n})"
+                )));
+            }
+        }
+        if let Some(m) = c.max_rmse_px {
+            if !(m.is_finite() && m > 0.0) {
+                return Err(self.err(format!(
+                    "calibration.max_rmse_px must be a positive number of pixels (got {m})"
                 )));
             }
         }

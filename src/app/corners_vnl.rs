@@ -290,8 +290,11 @@ fn group_rows(text: &str, path: &Path) -> Result<Vec<(String, Vec<Corner>)>> {
     Ok(images)
 }
 
-/// An image's corners with its camera and time-step key.
-type Keyed = (usize, String, Vec<Corner>);
+/// An image's camera, frame number and file name.
+pub type ImageName = (usize, i64, String);
+
+/// An image's camera, time-step key, corners and file name.
+type Keyed = (usize, String, Vec<Corner>, String);
 
 /// Keys each image with a board by camera and time step; also counts those without.
 fn key_images(
@@ -332,19 +335,20 @@ fn key_images(
                 cameras[camera].name
             )));
         }
-        keyed.push((camera, key, corners));
+        keyed.push((camera, key, corners, file));
     }
     Ok((keyed, without_board))
 }
 
-/// The dataset of the keyed images, frames numbered in sorted order of their keys.
+/// The dataset of the keyed images, frames numbered in sorted order of their keys,
+/// and each image's camera, frame number and file name.
 fn assemble(
     keyed: &[Keyed],
     path: &Path,
     target: Target,
     cameras: Vec<CameraSpec>,
-) -> Result<Dataset> {
-    let keys: BTreeSet<&String> = keyed.iter().map(|(_, k, _)| k).collect();
+) -> Result<(Dataset, Vec<ImageName>)> {
+    let keys: BTreeSet<&String> = keyed.iter().map(|(_, k, _, _)| k).collect();
     let frame_of: BTreeMap<&String, i64> = keys
         .into_iter()
         .enumerate()
@@ -352,7 +356,9 @@ fn assemble(
         .collect();
     let mut rows = Vec::new();
     let mut weights = Vec::new();
-    for (camera, key, corners) in keyed {
+    let mut files = Vec::new();
+    for (camera, key, corners, file) in keyed {
+        files.push((*camera, frame_of[key], file.clone()));
         for (i, c) in corners.iter().enumerate() {
             if let Some(uv) = c.xy {
                 rows.push((*camera, frame_of[key], i, uv));
@@ -367,7 +373,15 @@ fn assemble(
     for (o, w) in dataset.observations.iter_mut().zip(weights) {
         o.weight = w;
     }
-    Ok(dataset)
+    Ok((dataset, files))
+}
+
+/// A parsed corners table: the dataset, how many images had no board, and each
+/// image with a board as (camera, frame number, file name).
+pub struct Table {
+    pub dataset: Dataset,
+    pub without_board: usize,
+    pub files: Vec<ImageName>,
 }
 
 /// Reads a `corners.vnl` (SPEC §5): one row per corner, `filename x y [level|weight]`,
@@ -380,8 +394,19 @@ pub fn read_corners_vnl(
     cameras: Vec<CameraSpec>,
     patterns: &BTreeMap<String, String>,
 ) -> Result<(Dataset, usize)> {
+    let t = read_table(path, target, cameras, patterns)?;
+    Ok((t.dataset, t.without_board))
+}
+
+/// [`read_corners_vnl`] with the image file names.
+pub fn read_table(
+    path: &Path,
+    target: Target,
+    cameras: Vec<CameraSpec>,
+    patterns: &BTreeMap<String, String>,
+) -> Result<Table> {
     let bytes = crate::app::fsio::read_limited(path, crate::app::fsio::MAX_DATA_BYTES)?;
-    parse_corners_vnl(&bytes, path, target, cameras, patterns)
+    parse_table(&bytes, path, target, cameras, patterns)
 }
 
 /// Parses `corners.vnl` bytes; `path` names the source in messages.
@@ -392,12 +417,28 @@ pub fn parse_corners_vnl(
     cameras: Vec<CameraSpec>,
     patterns: &BTreeMap<String, String>,
 ) -> Result<(Dataset, usize)> {
+    let t = parse_table(bytes, path, target, cameras, patterns)?;
+    Ok((t.dataset, t.without_board))
+}
+
+/// [`parse_corners_vnl`] with the image file names.
+pub fn parse_table(
+    bytes: &[u8],
+    path: &Path,
+    target: Target,
+    cameras: Vec<CameraSpec>,
+    patterns: &BTreeMap<String, String>,
+) -> Result<Table> {
     let text = table_text(bytes, path)?;
     check_patterns_cover(path, &cameras, patterns)?;
     let images = group_rows(text, path)?;
     let (keyed, without_board) = key_images(images, path, &target, &cameras, patterns)?;
-    let dataset = assemble(&keyed, path, target, cameras)?;
-    Ok((dataset, without_board))
+    let (dataset, files) = assemble(&keyed, path, target, cameras)?;
+    Ok(Table {
+        dataset,
+        without_board,
+        files,
+    })
 }
 
 /// Writes a dataset as a `corners.vnl` with one image per (camera, frame) named

@@ -3,7 +3,8 @@
 //! [`crate::app::fsio::OutputSet`], which swaps them in as one set).
 use crate::app::calibration_json::CalibrationJson;
 use crate::app::exports;
-use crate::app::fsio::write_atomic;
+use crate::app::fsio::{write_atomic, FAILED_CALIBRATION, FAILED_OUTLIERS};
+use crate::app::guard::Failure;
 use crate::error::{Error, Result};
 use crate::solver::calibrate::Calibration;
 use std::path::{Path, PathBuf};
@@ -14,6 +15,20 @@ pub fn write_calibration(dir: &Path, c: &Calibration) -> Result<Written> {
     let written = write_models(dir, &CalibrationJson::from(c))?;
     write_atomic(&dir.join("outliers.csv"), &suspects_csv(c)?)?;
     Ok(written)
+}
+
+/// Writes a calibration that failed its guard rails: only `FAILED-calibration.json`
+/// (with the failure's reasons and hints) and `FAILED-outliers.csv`, and no model
+/// file, so that nothing a pipeline loads exists for it; returns the JSON's path.
+pub fn write_failed(dir: &Path, c: &Calibration, failure: &Failure) -> Result<PathBuf> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::write(dir, e))?;
+    let mut json = CalibrationJson::from(c);
+    json.failure = Some(failure.clone());
+    let text = serde_json::to_string_pretty(&json).expect("calibration serialises");
+    let path = dir.join(FAILED_CALIBRATION);
+    write_atomic(&path, text.as_bytes())?;
+    write_atomic(&dir.join(FAILED_OUTLIERS), &suspects_csv(c)?)?;
+    Ok(path)
 }
 
 /// `outliers.csv`: the observations outlier rejection removed (`rejected`), then
@@ -49,6 +64,12 @@ pub fn suspects_csv(c: &Calibration) -> Result<Vec<u8>> {
 /// (`cameras.txt`); returns the JSON's path and a warning per camera an export
 /// format cannot hold exactly (left out, never approximated).
 pub fn write_models(dir: &Path, json: &CalibrationJson) -> Result<Written> {
+    if let Some(f) = &json.failure {
+        return Err(Error::Invalid(format!(
+            "this calibration failed its guard rails ({}); its models are not exported",
+            f.reasons.join("; ")
+        )));
+    }
     let mut files = std::collections::BTreeMap::new();
     for cam in &json.cameras {
         let file = exports::model_file_name(&cam.name);

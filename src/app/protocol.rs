@@ -254,6 +254,8 @@ pub struct Setup {
     pub reference: Option<Calibration>,
     pub subsets: Vec<Vec<usize>>,
     pub settings: SolverSettings,
+    /// Warnings about the configuration (a reference set that is the training data).
+    pub warnings: Vec<String>,
 }
 
 /// Loads the data, runs the reference calibration and draws the subsets.
@@ -265,11 +267,13 @@ pub fn prepare(config: &Config, protocol: &ProtocolConfig) -> Result<Setup> {
         threads: 1,
         ..SolverSettings::from(&config.calibration)
     };
+    let mut warnings = Vec::new();
     let reference = match &config.reference {
         None => None,
         Some(r) => {
             let (ref_data, _) =
                 crate::app::source::load_source(&r.source, r.target, &config.cameras)?;
+            warnings.extend(crate::app::lint::reference_is_training(&dataset, &ref_data));
             if ref_data.cameras.len() != dataset.cameras.len() {
                 return Err(Error::Invalid(format!(
                     "the reference set has {} camera(s) but the data has {}; set reference.cameras",
@@ -322,6 +326,7 @@ pub fn prepare(config: &Config, protocol: &ProtocolConfig) -> Result<Setup> {
         reference,
         subsets,
         settings,
+        warnings,
     })
 }
 

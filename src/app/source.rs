@@ -2,6 +2,7 @@
 //! or a built-in synthetic preset; and writing a generated preset to disk.
 use crate::app::config::{Config, DataSource};
 use crate::app::fsio::write_atomic;
+use crate::app::lint::{self, FrameFiles, NameSource};
 use crate::app::{corners_vnl, observations_csv};
 use crate::error::Result;
 use crate::model::camera::CameraSpec;
@@ -10,24 +11,75 @@ use crate::model::synthetic::{self, Truth};
 use crate::model::target::Target;
 use std::path::Path;
 
-/// Loads a config's `[data]`; photos are detected (or taken from the detection
-/// cache) with a progress bar, their results written into the output dir and
-/// summarised on stderr.
-pub fn load_data(config: &Config) -> Result<(Dataset, Option<synthetic::Truth>)> {
-    if let DataSource::Photos { .. } = &config.data {
-        let run = crate::app::photos::detect_photos(
-            &config.data,
-            config.target,
-            &config.cameras,
-            &config.output_dir,
-            true,
-        )?;
-        for line in crate::app::photos::summary(&run) {
-            eprintln!("{line}");
+/// A config's data with what loading it learnt beyond the observations.
+#[derive(Debug, Clone)]
+pub struct Loaded {
+    pub dataset: Dataset,
+    /// The truth of synthetic data.
+    pub truth: Option<synthetic::Truth>,
+    /// The image file of each view, where the data came from files.
+    pub files: FrameFiles,
+    /// Warnings about the input (file names that look like several cameras).
+    pub warnings: Vec<String>,
+}
+
+/// Loads a config's `[data]` with its file names and input warnings; photos are
+/// detected (or taken from the detection cache) with a progress bar, their results
+/// written into the output dir and summarised on stderr.
+pub fn load(config: &Config) -> Result<Loaded> {
+    let names: Vec<String> = config.cameras.iter().map(|c| c.name.clone()).collect();
+    let (dataset, truth, listed, kind) = match &config.data {
+        DataSource::Photos { .. } => {
+            let run = crate::app::photos::detect_photos(
+                &config.data,
+                config.target,
+                &config.cameras,
+                &config.output_dir,
+                true,
+            )?;
+            for line in crate::app::photos::summary(&run) {
+                eprintln!("{line}");
+            }
+            let listed: Vec<(usize, i64, String)> = run
+                .images
+                .iter()
+                .map(|r| (r.file.camera, r.file.frame, r.file.name.clone()))
+                .collect();
+            (run.dataset, None, listed, Some(NameSource::Photos))
         }
-        return Ok((run.dataset, None));
+        DataSource::CornersVnl { path, patterns } => {
+            let t = corners_vnl::read_table(path, config.target, config.cameras.clone(), patterns)?;
+            (t.dataset, None, t.files, Some(NameSource::CornersVnl))
+        }
+        other => {
+            let (d, t) = load_source(other, config.target, &config.cameras)?;
+            (d, t, Vec::new(), None)
+        }
+    };
+    let warnings = match kind {
+        Some(kind) => {
+            let by_camera: Vec<(usize, String)> =
+                listed.iter().map(|(k, _, n)| (*k, n.clone())).collect();
+            lint::several_cameras(&names, &by_camera, kind)
+        }
+        None => Vec::new(),
+    };
+    let files = listed.into_iter().map(|(k, f, n)| ((k, f), n)).collect();
+    Ok(Loaded {
+        dataset,
+        truth,
+        files,
+        warnings,
+    })
+}
+
+/// Loads a config's `[data]` (see [`load`]), printing the input warnings on stderr.
+pub fn load_data(config: &Config) -> Result<(Dataset, Option<synthetic::Truth>)> {
+    let loaded = load(config)?;
+    for w in &loaded.warnings {
+        eprintln!("warning: {w}");
     }
-    load_source(&config.data, config.target, &config.cameras)
+    Ok((loaded.dataset, loaded.truth))
 }
 
 /// Loads the dataset a data source names, for the given board and cameras.

@@ -4,6 +4,7 @@ use serde::{Deserialize, Serialize};
 
 /// A board of `rows × cols` inner corners, `spacing` metres apart.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Target {
     pub rows: usize,
     pub cols: usize,

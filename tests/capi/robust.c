@@ -57,6 +57,46 @@ int main(void) {
                            sizeof error);
   report("calibrate", rc);
   if (rc == 0) printf("fx %.3f iterations %d\n", cameras[0].params[0], result.iterations);
+
+  /* deformcal_calibrate_ex: tolerances, per-frame results, the guard rails. */
+  DcTolerances tol;
+  memset(&tol, 0, sizeof tol);
+  DcFrameResult frames[8];
+  size_t num_frames = 0;
+  tol.function_tolerance = -1.0;
+  report("tolerance_negative",
+         deformcal_calibrate_ex(&target, &camera, 1, obs, count, &options, &tol, &result, cameras,
+                                frames, 8, &num_frames, error, sizeof error));
+  tol.function_tolerance = 0.0;
+  tol.max_rmse_px = NAN;
+  report("max_rmse_nan",
+         deformcal_calibrate_ex(&target, &camera, 1, obs, count, &options, &tol, &result, cameras,
+                                frames, 8, &num_frames, error, sizeof error));
+  tol.max_rmse_px = 0.0;
+  report("frames_small",
+         deformcal_calibrate_ex(&target, &camera, 1, obs, count, &options, &tol, &result, cameras,
+                                frames, 2, &num_frames, error, sizeof error));
+  printf("num_frames %zu\n", num_frames);
+  options.max_iterations = 1;
+  report("not_converged",
+         deformcal_calibrate_ex(&target, &camera, 1, obs, count, &options, &tol, &result, cameras,
+                                frames, 8, &num_frames, error, sizeof error));
+  printf("not_converged converged %d fx_filled %d frame_used %d\n", result.converged,
+         cameras[0].params[0] > 0.0, frames[0].used);
+  options.max_iterations = 0;
+  tol.function_tolerance = 1e-12;
+  rc = deformcal_calibrate_ex(&target, &camera, 1, obs, count, &options, &tol, &result, cameras,
+                              NULL, 0, NULL, error, sizeof error);
+  report("calibrate_ex_no_frames", rc);
+  rc = deformcal_calibrate_ex(&target, &camera, 1, obs, count, &options, &tol, &result, cameras,
+                              frames, 8, &num_frames, error, sizeof error);
+  report("calibrate_ex", rc);
+  if (rc == 0) {
+    double sum = 0.0;
+    for (size_t i = 0; i < num_frames; ++i) sum += frames[i].used ? 1.0 : 0.0;
+    printf("frames_used %.0f of %zu frame0 %lld rmse %.4f\n", sum, num_frames,
+           (long long)frames[0].frame, frames[0].rmse_px);
+  }
   free(obs);
   return 0;
 }

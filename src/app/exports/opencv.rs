@@ -70,7 +70,10 @@ pub fn opencv_yaml(c: &CalibrationJson, warnings: &mut Vec<String>) -> Option<St
     let mut written = 0;
     for cam in &c.cameras {
         let prefix = format!("{}_", key_of(&cam.name));
-        let Some(block) = camera_block(&prefix, cam, c.rmse_px) else {
+        // Each camera's own RMSE, as OpenCV's per-camera calibration reports it; a
+        // file written before per-camera RMSEs existed has only the overall one.
+        let rmse = cam.rmse_px.unwrap_or(c.rmse_px);
+        let Some(block) = camera_block(&prefix, cam, rmse) else {
             warnings.push(unrepresentable("opencv.yaml", cam));
             continue;
         };
