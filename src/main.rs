@@ -242,7 +242,14 @@ fn run_calibrate(args: CalibrateArgs) -> Result<()> {
     };
     let first = match config.calibration.method {
         MethodChoice::Fixed(m) => m,
-        MethodChoice::Auto => Method::Standard,
+        MethodChoice::Auto => {
+            // Too few images for the folds is no fault of the data: no hints.
+            deformcal::solver::select::check(
+                &loaded.dataset,
+                &AutoSettings::from(&config.calibration),
+            )?;
+            Method::Standard
+        }
     };
     let mut result = run_method(&config, &loaded.dataset).inspect_err(|_| {
         for h in guard::error_hints(&loaded.dataset, &request_of(&config, first), rules) {

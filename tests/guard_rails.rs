@@ -331,8 +331,12 @@ fn presets_and_the_repos_configs_pass_the_guard_without_warnings() {
     ] {
         let config = deformcal::Config::load(&configs.join(format!("{name}.toml"))).unwrap();
         let loaded = deformcal::app::source::load(&config).unwrap();
+        let deformcal::model::selection::MethodChoice::Fixed(method) = config.calibration.method
+        else {
+            panic!("{name}: the configs name a method");
+        };
         let r = Request {
-            method: config.calibration.method,
+            method,
             settings: SolverSettings::from(&config.calibration),
             gauge: config.calibration.gauge_corners.clone(),
         };

@@ -28,8 +28,8 @@ fn by_complexity(fits: &[(Method, Result<Calibration>)]) -> Vec<usize> {
     order
 }
 
-/// Checks the settings against the data before any solve.
-fn check(dataset: &Dataset, auto: &AutoSettings) -> Result<()> {
+/// Checks `auto`'s settings against the data before any solve.
+pub fn check(dataset: &Dataset, auto: &AutoSettings) -> Result<()> {
     if !auto.candidates.contains(&Method::Standard) {
         return Err(Error::Invalid(
             "method = \"auto\" needs `standard` among its candidates (the baseline)".into(),
