@@ -235,7 +235,7 @@ fn run_calibrate(args: CalibrateArgs) -> Result<()> {
     let config = calibrate_config(&args)?;
     // Lock and stage the output before the work: a busy or unwritable output
     // directory fails now, not after a long solve.
-    let set = OutputSet::begin(&config.output_dir, fsio::calibration_files())?;
+    let set = OutputSet::begin(&config.output_dir, output::calibration_files())?;
     let loaded = deformcal::app::source::load(&config)?;
     let rules = guard::Rules {
         max_rmse_px: config.calibration.max_rmse_px,
@@ -288,8 +288,8 @@ fn run_calibrate(args: CalibrateArgs) -> Result<()> {
     Err(GuardFailed(format!(
         "the calibration FAILED: {}; wrote {} and {} (no model files)",
         failure.reasons.join("; "),
-        config.output_dir.join(fsio::FAILED_CALIBRATION).display(),
-        fsio::FAILED_OUTLIERS
+        config.output_dir.join(output::FAILED_CALIBRATION).display(),
+        output::FAILED_OUTLIERS
     ))
     .into())
 }
@@ -429,7 +429,7 @@ fn run_compare(args: CompareArgs) -> Result<()> {
 
 fn run_export(args: ExportArgs) -> Result<()> {
     let json = deformcal::app::calibration_json::CalibrationJson::load(&args.calibration)?;
-    let set = OutputSet::begin(&args.output, fsio::calibration_files())?;
+    let set = OutputSet::begin(&args.output, output::calibration_files())?;
     for w in output::write_models(set.path(), &json)?.warnings {
         eprintln!("warning: {w}");
     }

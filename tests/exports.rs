@@ -6,7 +6,7 @@
 mod common;
 use common::{python_has, run_tool};
 use deformcal::app::calibration_json::{CalibrationJson, CameraJson};
-use deformcal::app::fsio::calibration_files;
+use deformcal::app::output::calibration_files;
 use deformcal::app::output::{write_calibration, Written};
 use deformcal::model::synthetic::{Generator, Preset};
 use deformcal::solver::problem::SolverSettings;

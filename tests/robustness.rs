@@ -3,7 +3,8 @@
 //! cases of tests/bad_inputs.
 mod common;
 use common::*;
-use deformcal::app::fsio::{self, OutputSet};
+use deformcal::app::fsio::OutputSet;
+use deformcal::app::output;
 use deformcal::model::metrics::mapping_error_rot;
 use deformcal::model::synthetic::{Generator, Preset};
 use deformcal::solver::problem::{Loss, SolverSettings};
@@ -407,7 +408,7 @@ fn a_second_writer_is_refused_while_the_first_holds_the_lock() {
     )
     .unwrap();
     let out = dir.path().join("out");
-    let held = OutputSet::begin(&out, fsio::calibration_files()).unwrap();
+    let held = OutputSet::begin(&out, output::calibration_files()).unwrap();
     let e = fails(&deformcal(&[
         "--config",
         config.to_str().unwrap(),
@@ -464,7 +465,7 @@ fn the_output_set_is_replaced_whole_or_not_at_all() {
     assert!(out.join("cam1.cameramodel").exists());
 
     // A staged set dropped before its commit (a crash, SIGINT) changes nothing.
-    let set = OutputSet::begin(&out, fsio::calibration_files()).unwrap();
+    let set = OutputSet::begin(&out, output::calibration_files()).unwrap();
     std::fs::write(set.path().join("calibration.json"), "half").unwrap();
     drop(set);
     assert_eq!(std::fs::read(out.join("calibration.json")).unwrap(), before);

@@ -75,30 +75,6 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
 /// replaced by the new set, every other entry is kept.
 pub type Owns = Box<dyn Fn(&str) -> bool>;
 
-/// What a calibration that failed its guard rails writes instead of
-/// `calibration.json`: a name no pipeline takes for a result.
-pub const FAILED_CALIBRATION: &str = "FAILED-calibration.json";
-/// What a failed calibration writes instead of `outliers.csv`.
-pub const FAILED_OUTLIERS: &str = "FAILED-outliers.csv";
-
-/// The files of one calibration (`calibration.json` and what goes with it, or the
-/// `FAILED-` files of a failed one): a new run replaces all of them.
-pub fn calibration_files() -> Owns {
-    Box::new(|name| {
-        matches!(
-            name,
-            "calibration.json"
-                | FAILED_CALIBRATION
-                | FAILED_OUTLIERS
-                | "opencv.yaml"
-                | "outliers.csv"
-                | crate::app::exports::KALIBR_FILE
-                | crate::app::exports::COLMAP_FILE
-        ) || name.ends_with(".cameramodel")
-            || name.ends_with(crate::app::exports::ROS_SUFFIX)
-    })
-}
-
 /// The files of one protocol run.
 pub fn protocol_files() -> Owns {
     Box::new(|name| {

@@ -3,11 +3,35 @@
 //! [`crate::app::fsio::OutputSet`], which swaps them in as one set).
 use crate::app::calibration_json::CalibrationJson;
 use crate::app::exports;
-use crate::app::fsio::{write_atomic, FAILED_CALIBRATION, FAILED_OUTLIERS};
+use crate::app::fsio::write_atomic;
 use crate::app::guard::Failure;
 use crate::error::{Error, Result};
 use crate::solver::calibrate::Calibration;
 use std::path::{Path, PathBuf};
+
+/// What a calibration that failed its guard rails writes instead of
+/// `calibration.json`: a name no pipeline takes for a result.
+pub const FAILED_CALIBRATION: &str = "FAILED-calibration.json";
+/// What a failed calibration writes instead of `outliers.csv`.
+pub const FAILED_OUTLIERS: &str = "FAILED-outliers.csv";
+
+/// The files of one calibration (`calibration.json` and what goes with it, or the
+/// `FAILED-` files of a failed one): a new run replaces all of them.
+pub fn calibration_files() -> crate::app::fsio::Owns {
+    Box::new(|name| {
+        matches!(
+            name,
+            "calibration.json"
+                | FAILED_CALIBRATION
+                | FAILED_OUTLIERS
+                | "opencv.yaml"
+                | "outliers.csv"
+                | crate::app::exports::KALIBR_FILE
+                | crate::app::exports::COLMAP_FILE
+        ) || name.ends_with(".cameramodel")
+            || name.ends_with(crate::app::exports::ROS_SUFFIX)
+    })
+}
 
 /// Writes `calibration.json`, its exports (see [`write_models`]) and
 /// `outliers.csv` into `dir` (created if needed); returns the JSON's path.
