@@ -430,7 +430,10 @@ fn run_compare(args: CompareArgs) -> Result<()> {
 fn run_export(args: ExportArgs) -> Result<()> {
     let json = deformcal::app::calibration_json::CalibrationJson::load(&args.calibration)?;
     let set = OutputSet::begin(&args.output, output::calibration_files())?;
-    for w in output::write_models(set.path(), &json)?.warnings {
+    let inputs = deformcal::app::exports::OptimizationInputs::Absent(
+        deformcal::app::exports::NOT_IN_CALIBRATION_JSON.into(),
+    );
+    for w in output::write_models(set.path(), &json, &inputs)?.warnings {
         eprintln!("warning: {w}");
     }
     set.commit()?;
@@ -438,6 +441,10 @@ fn run_export(args: ExportArgs) -> Result<()> {
         "wrote calibration.json, opencv.yaml and {} camera model(s) to {}",
         json.cameras.len(),
         args.output.display()
+    );
+    println!(
+        "  the mrcal models carry no optimization_inputs: {}",
+        deformcal::app::exports::NOT_IN_CALIBRATION_JSON
     );
     Ok(())
 }

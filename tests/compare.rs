@@ -27,7 +27,11 @@ fn independent_calibrations_differ_by_their_noise_and_a_bias_by_more() {
             let a = json(Preset::T2, 20 + 2 * i, 0.0, Method::Standard);
             let b = json(Preset::T2, 21 + 2 * i, 0.0, Method::Standard);
             let d = &compare(&a, &b).unwrap()[0];
-            eprintln!("rigid pair {i}: {:.4} px rot., {}", d.mapping_error_rot_px, d.verdict());
+            eprintln!(
+                "rigid pair {i}: {:.4} px rot., {}",
+                d.mapping_error_rot_px,
+                d.verdict()
+            );
             d.ratio().expect("both files carry their uncertainty")
         })
         .collect();
@@ -37,9 +41,17 @@ fn independent_calibrations_differ_by_their_noise_and_a_bias_by_more() {
     let a = json(Preset::T1, 30, 1.0, Method::Standard);
     let b = json(Preset::T1, 30, 1.0, Method::Dynamic);
     let d = &compare(&a, &b).unwrap()[0];
-    eprintln!("standard vs dynamic: {:.4} px rot., {}", d.mapping_error_rot_px, d.verdict());
+    eprintln!(
+        "standard vs dynamic: {:.4} px rot., {}",
+        d.mapping_error_rot_px,
+        d.verdict()
+    );
     assert!(d.ratio().unwrap() > 3.0 * REAL_DIFFERENCE_FACTOR, "{d:?}");
-    assert!(d.verdict().starts_with("a real difference"), "{}", d.verdict());
+    assert!(
+        d.verdict().starts_with("a real difference"),
+        "{}",
+        d.verdict()
+    );
 }
 
 #[test]
@@ -51,14 +63,29 @@ fn compare_on_the_command_line() {
     std::fs::write(&pa, serde_json::to_string(&a).unwrap()).unwrap();
     std::fs::write(&pb, serde_json::to_string(&b).unwrap()).unwrap();
     let bin = env!("CARGO_BIN_EXE_deformcal");
-    let out = Command::new(bin).arg("compare").args([&pa, &pb]).output().unwrap();
+    let out = Command::new(bin)
+        .arg("compare")
+        .args([&pa, &pb])
+        .output()
+        .unwrap();
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let d = &compare(&a, &b).unwrap()[0];
-    assert!(text.contains(&format!("{:.3} px", d.mapping_error_px)), "{text}");
+    assert!(
+        text.contains(&format!("{:.3} px", d.mapping_error_px)),
+        "{text}"
+    );
     assert!(text.contains("a real difference"), "{text}");
     // A calibration against itself: no difference at all.
-    let out = Command::new(bin).arg("compare").args([&pa, &pa]).output().unwrap();
+    let out = Command::new(bin)
+        .arg("compare")
+        .args([&pa, &pa])
+        .output()
+        .unwrap();
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("     0.000 px     0.000 px"), "{text}");
     // A file that is not a calibration names itself.

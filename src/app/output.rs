@@ -33,10 +33,12 @@ pub fn calibration_files() -> crate::app::fsio::Owns {
     })
 }
 
-/// Writes `calibration.json`, its exports (see [`write_models`]) and
+/// Writes `calibration.json`, its exports (see [`write_models`]; the mrcal models
+/// with the problem as `optimization_inputs` where mrcal can represent it) and
 /// `outliers.csv` into `dir` (created if needed); returns the JSON's path.
 pub fn write_calibration(dir: &Path, c: &Calibration) -> Result<Written> {
-    let written = write_models(dir, &CalibrationJson::from(c))?;
+    let inputs = exports::optimization_inputs(c);
+    let written = write_models(dir, &CalibrationJson::from(c), &inputs)?;
     write_atomic(&dir.join("outliers.csv"), &suspects_csv(c)?)?;
     Ok(written)
 }
@@ -86,8 +88,13 @@ pub fn suspects_csv(c: &Calibration) -> Result<Vec<u8>> {
 /// Writes a calibration's JSON and its exports into `dir`: OpenCV, mrcal, ROS
 /// (`<camera>_camera_info.yaml`), Kalibr (`camchain.yaml`) and COLMAP
 /// (`cameras.txt`); returns the JSON's path and a warning per camera an export
-/// format cannot hold exactly (left out, never approximated).
-pub fn write_models(dir: &Path, json: &CalibrationJson) -> Result<Written> {
+/// format cannot hold exactly (left out, never approximated). The mrcal models
+/// carry `inputs` (or say in a comment why they do not).
+pub fn write_models(
+    dir: &Path,
+    json: &CalibrationJson,
+    inputs: &exports::OptimizationInputs,
+) -> Result<Written> {
     if let Some(f) = &json.failure {
         return Err(Error::Invalid(format!(
             "this calibration failed its guard rails ({}); its models are not exported",
@@ -112,8 +119,8 @@ pub fn write_models(dir: &Path, json: &CalibrationJson) -> Result<Written> {
     if let Some(yaml) = exports::opencv_yaml(json, &mut warnings) {
         write_atomic(&dir.join("opencv.yaml"), yaml.as_bytes())?;
     }
-    for cam in &json.cameras {
-        match exports::mrcal_cameramodel(cam) {
+    for (k, cam) in json.cameras.iter().enumerate() {
+        match exports::mrcal_cameramodel(cam, k, inputs) {
             Some(model) => write_atomic(
                 &dir.join(exports::model_file_name(&cam.name)),
                 model.as_bytes(),

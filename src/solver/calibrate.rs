@@ -125,7 +125,6 @@ impl Calibration {
     /// scale), or without a loss those beyond three times the RMSE; worst first.
     pub fn suspects(&self) -> Vec<Suspect> {
         let cauchy = self.settings.loss == crate::solver::problem::Loss::Cauchy;
-        let a = self.settings.loss_scale_px;
         let mut out: Vec<Suspect> = self
             .dataset
             .observations
@@ -133,11 +132,7 @@ impl Calibration {
             .zip(self.residuals.chunks(2))
             .filter_map(|(o, r)| {
                 let e = (r[0] * r[0] + r[1] * r[1]).sqrt();
-                let weight = if cauchy {
-                    1.0 / (1.0 + (e * o.weight / a).powi(2))
-                } else {
-                    1.0
-                };
+                let weight = self.settings.loss_weight(e * o.weight);
                 let suspect = if cauchy {
                     weight < 0.5
                 } else {

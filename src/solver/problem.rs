@@ -70,6 +70,16 @@ impl Default for SolverSettings {
 }
 
 impl SolverSettings {
+    /// The weight the loss gives an observation whose weighted residual has norm
+    /// `r` pixels: ρ'(r²) of Ceres' Cauchy ρ(s) = a²·ln(1 + s/a²), 1 without a loss.
+    /// At a robust optimum these are the weights of the equivalent least squares.
+    pub fn loss_weight(&self, r: f64) -> f64 {
+        match self.loss {
+            Loss::None => 1.0,
+            Loss::Cauchy => 1.0 / (1.0 + (r / self.loss_scale_px).powi(2)),
+        }
+    }
+
     fn options(&self) -> SolveOptions {
         SolveOptions {
             loss: match self.loss {

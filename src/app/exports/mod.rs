@@ -1,5 +1,5 @@
 //! Exports of a calibration for the tools around it: OpenCV FileStorage YAML, mrcal
-//! `.cameramodel`, ROS `camera_info` YAML (with OpenCV's stereo rectification for a
+//! `.cameramodel` (with the problem as `optimization_inputs` where mrcal has it), ROS `camera_info` YAML (with OpenCV's stereo rectification for a
 //! pair), a Kalibr `camchain.yaml` and COLMAP `cameras.txt`.
 //!
 //! Every writer follows one rule: a camera is written only where the format has
@@ -10,6 +10,8 @@ use crate::app::calibration_json::CameraJson;
 mod colmap;
 mod kalibr;
 mod mrcal;
+mod mrcal_inputs;
+mod npz;
 mod opencv;
 mod rectify;
 mod ros;
@@ -17,6 +19,7 @@ mod ros;
 pub use colmap::{cameras_txt, COLMAP_FILE};
 pub use kalibr::{camchain_yaml, KALIBR_FILE};
 pub use mrcal::mrcal_cameramodel;
+pub use mrcal_inputs::{optimization_inputs, OptimizationInputs, NOT_IN_CALIBRATION_JSON};
 pub use opencv::opencv_yaml;
 pub use rectify::{stereo_rectify, Rectification};
 pub use ros::{camera_infos, ros_file_name, ROS_SUFFIX};
