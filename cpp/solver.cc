@@ -445,10 +445,47 @@ ceres::Solver::Options MakeSolverOptions(const ffi::SolveOptions& o) {
   return s;
 }
 
+// The index in the parameter buffer (which starts at `base`) of every Jacobian
+// column of `blocks`, in order.  A column is one tangent coordinate; every manifold
+// deformcal sets is a SubsetManifold, whose tangent coordinates are the free values
+// in order, read here off its PlusJacobian so no other manifold is silently misread.
+std::vector<uint32_t> ColumnParameters(const ceres::Problem& problem,
+                                       const std::vector<double*>& blocks, const double* base) {
+  std::vector<uint32_t> out;
+  for (double* b : blocks) {
+    const uint32_t offset = static_cast<uint32_t>(b - base);
+    const int n = problem.ParameterBlockSize(b);
+    const ceres::Manifold* m = problem.GetManifold(b);
+    if (m == nullptr) {
+      for (int i = 0; i < n; ++i) out.push_back(offset + static_cast<uint32_t>(i));
+      continue;
+    }
+    const int t = m->TangentSize();
+    std::vector<double> plus(static_cast<size_t>(n) * t);
+    if (!m->PlusJacobian(b, plus.data())) Fail("a manifold's Jacobian could not be evaluated");
+    for (int c = 0; c < t; ++c) {
+      int row = -1;
+      for (int r = 0; r < n; ++r) {
+        const double v = plus[static_cast<size_t>(r) * t + c];
+        if (v == 1.0 && row < 0) {
+          row = r;
+        } else if (v != 0.0) {
+          Fail("a parameter block's manifold is not a subset of its values");
+        }
+      }
+      if (row < 0) Fail("a parameter block's manifold is not a subset of its values");
+      out.push_back(offset + static_cast<uint32_t>(row));
+    }
+  }
+  return out;
+}
+
 // Residuals (loss not applied) in observation order; Ceres orders them by block.
-// With `jacobian`, also the Jacobian over the free parameter blocks.
+// With `jacobian`, also the Jacobian over the free parameter blocks, whose columns'
+// buffer indices go to `columns`.
 bool OrderedResiduals(Assembled& a, size_t num_observations, int threads, double* cost,
-                      std::vector<double>* out, ceres::CRSMatrix* jacobian) {
+                      std::vector<double>* out, ceres::CRSMatrix* jacobian,
+                      const double* base = nullptr, std::vector<uint32_t>* columns = nullptr) {
   ceres::Problem::EvaluateOptions e;
   e.residual_blocks = a.residuals;
   e.apply_loss_function = false;
@@ -459,6 +496,7 @@ bool OrderedResiduals(Assembled& a, size_t num_observations, int threads, double
     for (double* b : all) {
       if (!a.problem->IsParameterBlockConstant(b)) e.parameter_blocks.push_back(b);
     }
+    if (columns != nullptr) *columns = ColumnParameters(*a.problem, e.parameter_blocks, base);
   }
   std::vector<double> by_block;
   if (!a.problem->Evaluate(e, cost, &by_block, nullptr, jacobian)) return false;
@@ -526,8 +564,9 @@ Evaluation evaluate(const ProblemData& data, const SolveOptions& options, bool w
   double cost = 0.0;
   std::vector<double> ordered;
   ceres::CRSMatrix jacobian;
+  std::vector<uint32_t> columns;
   if (!OrderedResiduals(a, data.obs_uv.size() / 2, options.num_threads, &cost, &ordered,
-                        with_jacobian ? &jacobian : nullptr)) {
+                        with_jacobian ? &jacobian : nullptr, params.storage.data(), &columns)) {
     Fail("the residuals could not be evaluated (a point behind the camera?)");
   }
   Evaluation out;
@@ -539,6 +578,7 @@ Evaluation evaluate(const ProblemData& data, const SolveOptions& options, bool w
     for (int v : jacobian.rows) out.jacobian_row_ptr.push_back(static_cast<uint32_t>(v));
     for (int v : jacobian.cols) out.jacobian_col_idx.push_back(static_cast<uint32_t>(v));
     for (double v : jacobian.values) out.jacobian_values.push_back(v);
+    for (uint32_t c : columns) out.jacobian_col_param.push_back(c);
   }
   return out;
 }

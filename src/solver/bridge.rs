@@ -94,6 +94,9 @@ pub mod ffi {
         jacobian_row_ptr: Vec<u32>,
         jacobian_col_idx: Vec<u32>,
         jacobian_values: Vec<f64>,
+        /// Per Jacobian column: the index in `ProblemData::params` of the value it
+        /// differentiates (held values have no column).
+        jacobian_col_param: Vec<u32>,
     }
 
     unsafe extern "C++" {

@@ -5,6 +5,7 @@ use crate::model::camera::CameraSpec;
 use crate::model::dataset::Dataset;
 use crate::model::lens::Intrinsics;
 use crate::model::pose::Pose;
+use crate::model::uncertainty::{IntrinsicsCovariance, UncertaintyError};
 use crate::model::{fisheye_init, zhang};
 use crate::solver::problem::{
     choose_gauge, rmse, underobserved_corners, Hold, Problem, SolveReport, SolverSettings, State,
@@ -84,6 +85,8 @@ pub struct Calibration {
     /// The detector noise the user gave (`[calibration] detector_noise_px`), for
     /// [`Calibration::trust`]; `None` estimates it.
     pub detector_noise_px: Option<f64>,
+    /// Σ_θ of each camera at unit noise (see `solver::uncertainty`), or why there is none.
+    pub covariance: std::result::Result<Vec<IntrinsicsCovariance>, UncertaintyError>,
 }
 
 /// An observation the robust loss down-weighted, or (without a loss) one far off.
@@ -546,7 +549,7 @@ pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {
             stages.last().map(|s| s.message.as_str()).unwrap_or("")
         ));
     }
-    Ok(Calibration {
+    let mut c = Calibration {
         method: request.method,
         rmse_px: rmse(&residuals),
         residuals,
@@ -563,7 +566,10 @@ pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {
         settings: request.settings.clone(),
         rejected,
         detector_noise_px: None,
-    })
+        covariance: Err(UncertaintyError::Jacobian("not computed yet".into())),
+    };
+    c.covariance = crate::solver::uncertainty::unit_covariance(&c);
+    Ok(c)
 }
 
 /// What [`finish_robustly`] hands back: the data kept, their residuals, the frozen

@@ -6,3 +6,4 @@ pub mod calibrate;
 pub mod problem;
 pub mod robust;
 mod trust;
+pub mod uncertainty;
