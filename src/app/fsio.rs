@@ -87,6 +87,7 @@ pub fn calibration_files() -> Owns {
                 | crate::app::exports::COLMAP_FILE
         ) || name.ends_with(".cameramodel")
             || name.ends_with(crate::app::exports::ROS_SUFFIX)
+            || crate::app::uncertainty_plot::is_map(name)
     })
 }
 

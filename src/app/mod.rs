@@ -15,3 +15,4 @@ pub mod protocol;
 pub mod protocol_report;
 pub mod report;
 pub mod source;
+pub mod uncertainty_plot;

@@ -8,11 +8,13 @@ use crate::error::{Error, Result};
 use crate::solver::calibrate::Calibration;
 use std::path::{Path, PathBuf};
 
-/// Writes `calibration.json`, its exports (see [`write_models`]) and
-/// `outliers.csv` into `dir` (created if needed); returns the JSON's path.
+/// Writes `calibration.json`, its exports (see [`write_models`]), `outliers.csv`
+/// and each camera's projection-uncertainty map into `dir` (created if needed);
+/// returns the JSON's path.
 pub fn write_calibration(dir: &Path, c: &Calibration) -> Result<Written> {
     let written = write_models(dir, &CalibrationJson::from(c))?;
     write_atomic(&dir.join("outliers.csv"), &suspects_csv(c)?)?;
+    crate::app::uncertainty_plot::write_maps(dir, c)?;
     Ok(written)
 }
 

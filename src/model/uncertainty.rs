@@ -90,7 +90,11 @@ fn rotation_jacobian(k: &Intrinsics, ray: &Vector3<f64>) -> Option<Matrix2x3<f64
 /// The mapping-error grid's quadratic forms: H = Σ J_gᵀJ_g and, with the virtual
 /// rotation ω profiled out, H − C (KᵀK)⁻¹ Cᵀ (C = Σ J_gᵀK_g, KᵀK = Σ K_gᵀK_g),
 /// each over the M grid points; `None` without a usable grid point.
-pub fn mapping_forms(k: &Intrinsics, width: u32, height: u32) -> Option<(DMatrix<f64>, DMatrix<f64>, usize)> {
+pub fn mapping_forms(
+    k: &Intrinsics,
+    width: u32,
+    height: u32,
+) -> Option<(DMatrix<f64>, DMatrix<f64>, usize)> {
     let n = k.params().len();
     let (mut h, mut c, mut kk) = (DMatrix::zeros(n, n), DMatrix::zeros(n, 3), Matrix3::zeros());
     let mut m = 0;
@@ -159,6 +163,21 @@ impl UncertaintyMap {
             (column as f64 + 0.5) * w / self.columns as f64 - 0.5,
             (row as f64 + 0.5) * h / self.rows as f64 - 0.5,
         )
+    }
+
+    /// The smallest finite σ of the map (0 if none).
+    pub fn min(&self) -> f64 {
+        let min = self
+            .sigma_px
+            .iter()
+            .copied()
+            .filter(|v| v.is_finite())
+            .fold(f64::INFINITY, f64::min);
+        if min.is_finite() {
+            min
+        } else {
+            0.0
+        }
     }
 
     /// The largest finite σ of the map (0 if none).
@@ -230,7 +249,8 @@ mod tests {
         let scale = DMatrix::from_diagonal(&nalgebra::DVector::from_vec(vec![
             0.8, 0.8, 0.5, 0.5, 1e-3, 2e-3, 2e-3,
         ]));
-        &scale * (&a * a.transpose() / 7.0) * &scale
+        let correlated = &a * a.transpose() / 7.0 + DMatrix::identity(7, 7) * 0.05;
+        &scale * correlated * &scale
     }
 
     #[test]

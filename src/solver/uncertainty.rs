@@ -150,7 +150,10 @@ fn normal_matrix(
         let w = weights[r / 2];
         k_entries.clear();
         e_entries.clear();
-        let (lo, hi) = (e.jacobian_row_ptr[r] as usize, e.jacobian_row_ptr[r + 1] as usize);
+        let (lo, hi) = (
+            e.jacobian_row_ptr[r] as usize,
+            e.jacobian_row_ptr[r + 1] as usize,
+        );
         for i in lo..hi {
             let v = e.jacobian_values[i];
             match n.roles[e.jacobian_col_idx[i] as usize] {
@@ -278,7 +281,11 @@ fn describe(c: &Calibration, layout: &Layout, index: usize) -> String {
 
 /// Scales the normal matrix to a unit diagonal (its pivots then compare with
 /// [`MIN_PIVOT`] whatever the parameters' units); returns the column scales.
-fn jacobi_scale(c: &Calibration, layout: &Layout, n: &mut Normal) -> Result<Vec<f64>, UncertaintyError> {
+fn jacobi_scale(
+    c: &Calibration,
+    layout: &Layout,
+    n: &mut Normal,
+) -> Result<Vec<f64>, UncertaintyError> {
     let mut scale = vec![0.0; n.roles.len()];
     for (col, role) in n.roles.iter().enumerate() {
         let diag = match *role {
@@ -289,7 +296,11 @@ fn jacobi_scale(c: &Calibration, layout: &Layout, n: &mut Normal) -> Result<Vec<
             }
         };
         if !(diag > 0.0 && diag.is_finite()) {
-            return Err(UncertaintyError::RankDeficient(describe(c, layout, n.params[col])));
+            return Err(UncertaintyError::RankDeficient(describe(
+                c,
+                layout,
+                n.params[col],
+            )));
         }
         scale[col] = 1.0 / diag.sqrt();
     }
@@ -426,9 +437,7 @@ fn loss_weights(c: &Calibration, residuals: &[f64]) -> Vec<f64> {
 
 /// Σ_θ of every camera at unit noise, from the Jacobian at the calibration's
 /// optimum; [`Calibration::covariance`] holds it after every calibration.
-pub fn unit_covariance(
-    c: &Calibration,
-) -> Result<Vec<IntrinsicsCovariance>, UncertaintyError> {
+pub fn unit_covariance(c: &Calibration) -> Result<Vec<IntrinsicsCovariance>, UncertaintyError> {
     let problem = c.problem();
     let layout = problem.layout();
     let e = problem
