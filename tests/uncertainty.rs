@@ -298,3 +298,60 @@ fn a_calibration_writes_its_uncertainty_map() {
     let svg = std::fs::read_to_string(dir.path().join("uncertainty_cam0.svg")).unwrap();
     assert!(svg.contains("predicted 1-σ projection error"));
 }
+
+#[test]
+fn protocol_rows_carry_the_prediction_and_the_report_compares_it() {
+    use deformcal::app::config::{Config, ProtocolConfig};
+    use deformcal::app::protocol::prepare;
+    use deformcal::app::protocol_report::{protocol_csv, report_markdown, summarise};
+    let text = "[data]\nsynthetic = \"t2\"\nimages = 60\n[calibration]\ndetector_noise_px = 0.15\n";
+    let config = Config::parse(text, std::path::Path::new("test.toml")).unwrap();
+    let protocol = ProtocolConfig {
+        subsets: 3,
+        images_per_subset: 20,
+        seed: 7,
+        methods: vec![Method::Standard, Method::Dynamic],
+    };
+    let setup = prepare(&config, &protocol).unwrap();
+    let rows = setup.run(None, &|| {});
+    // The first subset's `dynamic` row holds what a calibration of it reports.
+    let row = rows
+        .iter()
+        .find(|r| r.subset == 0 && r.method == Method::Dynamic)
+        .unwrap();
+    let data = setup.dataset.subset(&setup.subsets[0]);
+    let request = Request {
+        method: Method::Dynamic,
+        settings: setup.settings.clone(),
+        gauge: None,
+    };
+    let mut c = calibrate(&data, &request).unwrap();
+    c.detector_noise_px = Some(0.15);
+    let u = c.uncertainty().unwrap().remove(0);
+    assert_eq!(
+        row.cameras[0].expected_mapping_error_px,
+        Some(u.expected_mapping_error_px)
+    );
+    assert_eq!(
+        row.bias_ratio,
+        Some(c.trust(Some(0.15)).unwrap().bias_ratio)
+    );
+    let summary = summarise(&setup.header, &rows);
+    for m in ["standard", "dynamic"] {
+        let metrics = &summary.methods[m].metrics;
+        assert_eq!(metrics["expected_mapping_error_px"].n, 3, "{m}");
+        assert_eq!(metrics["bias_ratio"].n, 3, "{m}");
+    }
+    let csv = String::from_utf8(protocol_csv(&setup.header, &rows).unwrap()).unwrap();
+    let head = csv.lines().next().unwrap();
+    assert!(
+        head.contains(",bias_ratio,") && head.contains(",expected_mapping_error_px,"),
+        "{head}"
+    );
+    let report = report_markdown(&summary, &rows, "");
+    assert!(
+        report.contains("### Predicted and observed spread"),
+        "{report}"
+    );
+    assert!(report.contains("| dynamic | "), "{report}");
+}
