@@ -355,3 +355,41 @@ fn protocol_rows_carry_the_prediction_and_the_report_compares_it() {
     );
     assert!(report.contains("| dynamic | "), "{report}");
 }
+
+#[test]
+fn direct_jacobian_equals_ceres_evaluate() {
+    // A stereo rig (rig block), bends (frame block), print error (corner block),
+    // a held lens parameter (a subset manifold) and non-unit weights.
+    let (mut d, _) = Generator::new(Preset::Stereo, Some(8), 36).generate();
+    d.cameras[1].fix = vec!["k2".into()];
+    for (i, o) in d.observations.iter_mut().enumerate() {
+        o.weight = if i % 5 == 0 { 0.5 } else { 1.0 };
+    }
+    for method in Method::ALL {
+        let c = common::run(&d, method, deformcal::solver::problem::Loss::Cauchy);
+        let p = c.problem();
+        let ceres = p.evaluate(&c.state, &c.settings, true).unwrap();
+        let direct = p.jacobian(&c.state, &c.settings).unwrap();
+        assert_eq!(direct.jacobian_rows, ceres.jacobian_rows, "{method}");
+        assert_eq!(
+            direct.jacobian_col_param, ceres.jacobian_col_param,
+            "{method}"
+        );
+        assert_eq!(direct.residuals, ceres.residuals, "{method}");
+        for r in 0..ceres.jacobian_rows {
+            let row = |e: &deformcal::solver::problem::Evaluation| {
+                let (lo, hi) = (
+                    e.jacobian_row_ptr[r] as usize,
+                    e.jacobian_row_ptr[r + 1] as usize,
+                );
+                let mut v: Vec<(u32, f64)> = (lo..hi)
+                    .map(|i| (e.jacobian_col_idx[i], e.jacobian_values[i]))
+                    .filter(|x| x.1 != 0.0)
+                    .collect();
+                v.sort_by_key(|x| x.0);
+                v
+            };
+            assert_eq!(row(&direct), row(&ceres), "{method} row {r}");
+        }
+    }
+}

@@ -112,6 +112,20 @@ pub mod ffi {
             with_jacobian: bool,
         ) -> Result<Evaluation>;
 
+        /// A Jacobian held in C++ (CRS over the free parameters, rows in observation order).
+        type Jacobian;
+        /// The weighted residuals, loss not applied.
+        fn residual_values(self: &Jacobian) -> &[f64];
+        fn num_cols(self: &Jacobian) -> usize;
+        fn row_offsets(self: &Jacobian) -> &[u32];
+        fn column_indices(self: &Jacobian) -> &[u32];
+        fn entries(self: &Jacobian) -> &[f64];
+        /// Per column: the index in `ProblemData::params` of the value it differentiates.
+        fn column_parameters(self: &Jacobian) -> &[u32];
+
+        /// The Jacobian straight from the cost functions.
+        fn jacobian(data: &ProblemData, options: &SolveOptions) -> Result<UniquePtr<Jacobian>>;
+
         // Only the cross-language registry tests call this.
         #[allow(dead_code)]
         /// The C++ registry's parameter count of a lens model (an error if unknown).

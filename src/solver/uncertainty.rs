@@ -27,34 +27,15 @@ use std::collections::HashMap;
 /// direction; a weak but real one, such as k3 against k1 and k2, stays far above).
 const MIN_PIVOT: f64 = 1e-10;
 
-/// Where a Jacobian column goes: the dense reduced system, or a block eliminated first.
+/// Most values the coupling block Bᵀ (eliminated × kept) may hold: 400 MB of f64.
+const MAX_COUPLING: usize = 50_000_000;
+
+/// Where a Jacobian column goes: the dense reduced system, or a block eliminated
+/// first (`index` counts the eliminated values, block by block).
 #[derive(Debug, Clone, Copy)]
 enum Role {
     Kept(usize),
-    Eliminated { group: usize, local: usize },
-}
-
-/// One eliminated block: its normal matrix D and its coupling B to the kept
-/// parameters it touches (row-major, `touched.len()` × size).
-#[derive(Debug, Clone, Default)]
-struct Group {
-    size: usize,
-    d: Vec<f64>,
-    touched: Vec<usize>,
-    position: HashMap<usize, usize>,
-    b: Vec<f64>,
-}
-
-impl Group {
-    fn row(&mut self, kept: usize) -> usize {
-        let next = self.touched.len();
-        let size = self.size;
-        *self.position.entry(kept).or_insert_with(|| {
-            self.touched.push(kept);
-            self.b.extend(std::iter::repeat_n(0.0, size));
-            next
-        })
-    }
+    Eliminated { group: usize, index: usize },
 }
 
 /// The normal matrix JᵀWJ in block-arrow form, and what its columns are.
@@ -64,8 +45,14 @@ struct Normal {
     params: Vec<usize>,
     /// Per kept index: its column.
     kept_columns: Vec<usize>,
+    /// The kept block A (kept × kept).
     a: DMatrix<f64>,
-    groups: Vec<Group>,
+    /// Per eliminated block: its first eliminated index and its size.
+    groups: Vec<(usize, usize)>,
+    /// Per eliminated block: its diagonal block D, size × size row-major.
+    d: Vec<Vec<f64>>,
+    /// Bᵀ (eliminated × kept), so that a kept value's couplings are contiguous.
+    bt: DMatrix<f64>,
 }
 
 /// The group of a buffer index when per-image blocks (`frames`) or per-corner
@@ -80,42 +67,60 @@ fn group_of(layout: &Layout, index: usize, frames: bool) -> Option<usize> {
     }
 }
 
-/// The roles of the columns: eliminate whichever of the per-image and per-corner
-/// blocks leaves the smaller reduced system.
-fn roles(layout: &Layout, params: &[usize]) -> (Vec<Role>, usize, Vec<usize>) {
-    let in_frames = params
-        .iter()
-        .filter(|&&p| group_of(layout, p, true).is_some())
-        .count();
-    let in_corners = params
-        .iter()
-        .filter(|&&p| group_of(layout, p, false).is_some())
-        .count();
+/// The roles of the columns and the eliminated blocks (first index, size):
+/// eliminate whichever of the per-image and per-corner blocks leaves the smaller
+/// reduced system.
+fn roles(layout: &Layout, params: &[usize]) -> (Vec<Role>, usize, Vec<(usize, usize)>) {
+    let count = |frames| {
+        params
+            .iter()
+            .filter(|&&p| group_of(layout, p, frames).is_some())
+            .count()
+    };
+    let (in_frames, in_corners) = (count(true), count(false));
     let frames = in_corners == 0 || in_frames >= in_corners;
-    let (mut roles, mut kept_columns) = (Vec::with_capacity(params.len()), Vec::new());
-    let mut groups: HashMap<usize, usize> = HashMap::new();
-    let mut sizes = Vec::new();
-    for (column, &p) in params.iter().enumerate() {
-        roles.push(match group_of(layout, p, frames) {
+    let mut ids: HashMap<usize, usize> = HashMap::new();
+    let mut sizes: Vec<usize> = Vec::new();
+    let mut local = Vec::with_capacity(params.len());
+    let mut kept = 0;
+    for &p in params {
+        local.push(match group_of(layout, p, frames) {
             None => {
-                kept_columns.push(column);
-                Role::Kept(kept_columns.len() - 1)
+                kept += 1;
+                None
             }
             Some(g) => {
                 let next = sizes.len();
-                let group = *groups.entry(g).or_insert(next);
-                if group == sizes.len() {
+                let group = *ids.entry(g).or_insert(next);
+                if group == next {
                     sizes.push(0);
                 }
                 sizes[group] += 1;
-                Role::Eliminated {
-                    group,
-                    local: sizes[group] - 1,
-                }
+                Some((group, sizes[group] - 1))
             }
         });
     }
-    (roles, kept_columns.len(), sizes)
+    let mut groups = Vec::with_capacity(sizes.len());
+    let mut start = 0;
+    for &m in &sizes {
+        groups.push((start, m));
+        start += m;
+    }
+    let mut k = 0;
+    let roles = local
+        .into_iter()
+        .map(|l| match l {
+            None => {
+                k += 1;
+                Role::Kept(k - 1)
+            }
+            Some((group, i)) => Role::Eliminated {
+                group,
+                index: groups[group].0 + i,
+            },
+        })
+        .collect();
+    (roles, kept, groups)
 }
 
 /// JᵀWJ from a CRS Jacobian with one weight per pair of rows (per observation).
@@ -125,8 +130,9 @@ fn normal_matrix(
     weights: &[f64],
 ) -> Result<Normal, UncertaintyError> {
     let params: Vec<usize> = e.jacobian_col_param.iter().map(|&p| p as usize).collect();
-    let (roles, kept, sizes) = roles(layout, &params);
-    if kept > MAX_REDUCED {
+    let (roles, kept, groups) = roles(layout, &params);
+    let eliminated: usize = groups.iter().map(|g| g.1).sum();
+    if kept > MAX_REDUCED || kept.saturating_mul(eliminated) > MAX_COUPLING {
         return Err(UncertaintyError::TooLarge(kept));
     }
     let mut n = Normal {
@@ -136,18 +142,12 @@ fn normal_matrix(
         roles,
         params,
         a: DMatrix::zeros(kept, kept),
-        groups: sizes
-            .iter()
-            .map(|&s| Group {
-                size: s,
-                d: vec![0.0; s * s],
-                ..Group::default()
-            })
-            .collect(),
+        d: groups.iter().map(|&(_, m)| vec![0.0; m * m]).collect(),
+        groups,
+        bt: DMatrix::zeros(eliminated, kept),
     };
     let (mut k_entries, mut e_entries) = (Vec::new(), Vec::new());
     for r in 0..e.jacobian_rows {
-        let w = weights[r / 2];
         k_entries.clear();
         e_entries.clear();
         let (lo, hi) = (
@@ -158,10 +158,10 @@ fn normal_matrix(
             let v = e.jacobian_values[i];
             match n.roles[e.jacobian_col_idx[i] as usize] {
                 Role::Kept(k) => k_entries.push((k, v)),
-                Role::Eliminated { group, local } => e_entries.push((group, local, v)),
+                Role::Eliminated { group, index } => e_entries.push((group, index, v)),
             }
         }
-        accumulate(&mut n, w, &k_entries, &e_entries)?;
+        accumulate(&mut n, weights[r / 2], &k_entries, &e_entries)?;
     }
     Ok(n)
 }
@@ -173,9 +173,11 @@ fn accumulate(
     kept: &[(usize, f64)],
     eliminated: &[(usize, usize, f64)],
 ) -> Result<(), UncertaintyError> {
-    for &(i, vi) in kept {
-        for &(j, vj) in kept {
-            n.a[(i, j)] += w * vi * vj;
+    let kk = n.a.nrows();
+    let a = n.a.as_mut_slice();
+    for &(j, vj) in kept {
+        for &(i, vi) in kept {
+            a[j * kk + i] += w * vi * vj;
         }
     }
     let Some(&(g, _, _)) = eliminated.first() else {
@@ -186,17 +188,18 @@ fn accumulate(
             "a residual depends on two eliminated blocks".into(),
         ));
     }
-    let group = &mut n.groups[g];
-    let m = group.size;
+    let (start, m) = n.groups[g];
+    let d = &mut n.d[g];
     for &(_, a, va) in eliminated {
         for &(_, b, vb) in eliminated {
-            group.d[a * m + b] += w * va * vb;
+            d[(a - start) * m + b - start] += w * va * vb;
         }
     }
-    for &(i, vi) in kept {
-        let row = group.row(i);
+    let ne = n.bt.nrows();
+    let bt = n.bt.as_mut_slice();
+    for &(k, vk) in kept {
         for &(_, a, va) in eliminated {
-            group.b[row * m + a] += w * vi * va;
+            bt[k * ne + a] += w * vk * va;
         }
     }
     Ok(())
@@ -206,36 +209,30 @@ fn accumulate(
 /// at the first pivot below [`MIN_PIVOT`] (the matrix is Jacobi-scaled, unit diagonal).
 fn cholesky(a: &mut [f64], m: usize) -> Result<(), usize> {
     for j in 0..m {
-        let mut d = a[j * m + j];
-        for k in 0..j {
-            d -= a[j * m + k] * a[j * m + k];
-        }
+        let (done, rest) = a.split_at_mut(j * m + m);
+        let row_j = &mut done[j * m..];
+        let d = row_j[j] - dot(&row_j[..j], &row_j[..j]);
         if !(d > MIN_PIVOT) {
             return Err(j);
         }
         let d = d.sqrt();
-        a[j * m + j] = d;
-        for i in j + 1..m {
-            let mut s = a[i * m + j];
-            for k in 0..j {
-                s -= a[i * m + k] * a[j * m + k];
-            }
-            a[i * m + j] = s / d;
-        }
-        for i in 0..j {
-            a[i * m + j] = 0.0;
+        row_j[j] = d;
+        row_j[j + 1..].iter_mut().for_each(|v| *v = 0.0);
+        for row_i in rest.chunks_exact_mut(m) {
+            row_i[j] = (row_i[j] - dot(&row_i[..j], &row_j[..j])) / d;
         }
     }
     Ok(())
 }
 
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
 /// Solves L y = b in place (L lower, row-major m × m).
 fn forward(l: &[f64], m: usize, b: &mut [f64]) {
     for i in 0..m {
-        let mut s = b[i];
-        for k in 0..i {
-            s -= l[i * m + k] * b[k];
-        }
+        let s = b[i] - dot(&l[i * m..i * m + i], &b[..i]);
         b[i] = s / l[i * m + i];
     }
 }
@@ -286,13 +283,16 @@ fn jacobi_scale(
     layout: &Layout,
     n: &mut Normal,
 ) -> Result<Vec<f64>, UncertaintyError> {
-    let mut scale = vec![0.0; n.roles.len()];
+    let kk = n.a.nrows();
+    let mut kept = vec![0.0; kk];
+    let mut eliminated = vec![0.0; n.bt.nrows()];
     for (col, role) in n.roles.iter().enumerate() {
-        let diag = match *role {
-            Role::Kept(k) => n.a[(k, k)],
-            Role::Eliminated { group, local } => {
-                let g = &n.groups[group];
-                g.d[local * g.size + local]
+        let (diag, slot) = match *role {
+            Role::Kept(k) => (n.a[(k, k)], &mut kept[k]),
+            Role::Eliminated { group, index } => {
+                let (start, m) = n.groups[group];
+                let i = index - start;
+                (n.d[group][i * m + i], &mut eliminated[index])
             }
         };
         if !(diag > 0.0 && diag.is_finite()) {
@@ -302,70 +302,53 @@ fn jacobi_scale(
                 n.params[col],
             )));
         }
-        scale[col] = 1.0 / diag.sqrt();
+        *slot = 1.0 / diag.sqrt();
     }
-    let kept: Vec<f64> = n.kept_columns.iter().map(|&col| scale[col]).collect();
-    let kk = kept.len();
-    for j in 0..kk {
-        for i in 0..kk {
-            n.a[(i, j)] *= kept[i] * kept[j];
+    for (j, mut column) in n.a.column_iter_mut().enumerate() {
+        for (i, v) in column.iter_mut().enumerate() {
+            *v *= kept[i] * kept[j];
         }
     }
-    let mut local_scale: Vec<Vec<f64>> = n.groups.iter().map(|g| vec![0.0; g.size]).collect();
-    for (col, role) in n.roles.iter().enumerate() {
-        if let Role::Eliminated { group, local } = *role {
-            local_scale[group][local] = scale[col];
-        }
-    }
-    for (g, s) in n.groups.iter_mut().zip(&local_scale) {
-        let m = g.size;
+    for (&(start, m), d) in n.groups.iter().zip(&mut n.d) {
         for a in 0..m {
             for b in 0..m {
-                g.d[a * m + b] *= s[a] * s[b];
-            }
-        }
-        for (row, &k) in g.touched.iter().enumerate() {
-            for a in 0..m {
-                g.b[row * m + a] *= kept[k] * s[a];
+                d[a * m + b] *= eliminated[start + a] * eliminated[start + b];
             }
         }
     }
-    Ok(scale)
-}
-
-/// The columns of each group, by local index.
-fn group_columns(n: &Normal) -> Vec<Vec<usize>> {
-    let mut out: Vec<Vec<usize>> = n.groups.iter().map(|g| vec![0; g.size]).collect();
-    for (col, role) in n.roles.iter().enumerate() {
-        if let Role::Eliminated { group, local } = *role {
-            out[group][local] = col;
+    for (k, mut column) in n.bt.column_iter_mut().enumerate() {
+        for (e, v) in column.iter_mut().enumerate() {
+            *v *= kept[k] * eliminated[e];
         }
     }
-    out
+    Ok(n.roles
+        .iter()
+        .map(|r| match *r {
+            Role::Kept(k) => kept[k],
+            Role::Eliminated { index, .. } => eliminated[index],
+        })
+        .collect())
 }
 
-/// Eliminates every group: factors D = LLᵀ in place, turns B into M = B L⁻ᵀ and
-/// subtracts M Mᵀ from the kept block, leaving the Schur complement there; then
-/// factors that too.
+/// Eliminates every block: factors D = LLᵀ in place, turns Bᵀ into L⁻¹Bᵀ and
+/// subtracts its Gram matrix from the kept block, leaving the Schur complement
+/// A − B D⁻¹ Bᵀ there (one matrix product); then factors that too.
 fn eliminate(c: &Calibration, layout: &Layout, n: &mut Normal) -> Result<(), UncertaintyError> {
-    let columns = group_columns(n);
-    for (g, group) in n.groups.iter_mut().enumerate() {
-        let m = group.size;
-        cholesky(&mut group.d, m).map_err(|l| {
-            UncertaintyError::RankDeficient(describe(c, layout, n.params[columns[g][l]]))
+    let ne = n.bt.nrows();
+    for (g, &(start, m)) in n.groups.iter().enumerate() {
+        cholesky(&mut n.d[g], m).map_err(|l| {
+            let col = n
+                .roles
+                .iter()
+                .position(|r| matches!(*r, Role::Eliminated { index, .. } if index == start + l))
+                .unwrap_or(0);
+            UncertaintyError::RankDeficient(describe(c, layout, n.params[col]))
         })?;
-        for row in group.b.chunks_exact_mut(m) {
-            forward(&group.d, m, row);
-        }
-        let t = group.touched.len();
-        let mm = DMatrix::from_row_slice(t, m, &group.b);
-        let product = &mm * mm.transpose();
-        for (q, &kq) in group.touched.iter().enumerate() {
-            for (p, &kp) in group.touched.iter().enumerate() {
-                n.a[(kp, kq)] -= product[(p, q)];
-            }
+        for column in n.bt.as_mut_slice().chunks_exact_mut(ne) {
+            forward(&n.d[g], m, &mut column[start..start + m]);
         }
     }
+    n.a.gemm(-1.0, &n.bt.transpose(), &n.bt, 1.0);
     let kk = n.a.nrows();
     // Symmetric, so the column-major storage reads as row-major.
     cholesky(n.a.as_mut_slice(), kk).map_err(|k| {
@@ -377,42 +360,41 @@ fn eliminate(c: &Calibration, layout: &Layout, n: &mut Normal) -> Result<(), Unc
 /// row of `targets.len()` values per column of the Jacobian, in its units.
 fn solve_columns(n: &Normal, scale: &[f64], targets: &[usize]) -> Vec<f64> {
     let (kk, t) = (n.a.nrows(), targets.len());
+    // The factor L is stored row-major in `a`; backward substitution reads it by
+    // columns, which Lᵀ stored row-major (a's transpose) holds by rows.
     let l = n.a.as_slice();
-    let mut x = vec![0.0; n.roles.len() * t];
-    let mut kept_x = vec![0.0; kk * t];
+    let lt = n.a.transpose();
+    let lt = lt.as_slice();
+    let mut kept_x = DMatrix::zeros(kk, t);
     for (u, &col) in targets.iter().enumerate() {
         let Role::Kept(k) = n.roles[col] else {
             unreachable!("intrinsics are never eliminated")
         };
-        let mut rhs = vec![0.0; kk];
+        let rhs = kept_x.column_mut(u);
+        let rhs = rhs.data.into_slice_mut();
         rhs[k] = scale[col];
-        forward(l, kk, &mut rhs);
-        backward(l, kk, &mut rhs);
-        for (i, v) in rhs.into_iter().enumerate() {
-            kept_x[i * t + u] = v;
+        forward(l, kk, rhs);
+        for i in (0..kk).rev() {
+            let row = &lt[i * kk..(i + 1) * kk];
+            rhs[i] = (rhs[i] - dot(&row[i + 1..], &rhs[i + 1..])) / row[i];
         }
     }
-    for (i, &col) in n.kept_columns.iter().enumerate() {
-        for u in 0..t {
-            x[col * t + u] = scale[col] * kept_x[i * t + u];
+    // x_g = −L⁻ᵀ (L⁻¹Bᵀ) x_kept for every eliminated block at once.
+    let mut eliminated_x = -(&n.bt * &kept_x);
+    let ne = n.bt.nrows();
+    for (g, &(start, m)) in n.groups.iter().enumerate() {
+        for column in eliminated_x.as_mut_slice().chunks_exact_mut(ne) {
+            backward(&n.d[g], m, &mut column[start..start + m]);
         }
     }
-    let columns = group_columns(n);
-    for (g, group) in n.groups.iter().enumerate() {
-        let m = group.size;
-        for u in 0..t {
-            // x_g = −L⁻ᵀ Mᵀ x_touched.
-            let mut y = vec![0.0; m];
-            for (row, &k) in group.touched.iter().enumerate() {
-                for a in 0..m {
-                    y[a] -= group.b[row * m + a] * kept_x[k * t + u];
-                }
-            }
-            backward(&group.d, m, &mut y);
-            for (a, v) in y.into_iter().enumerate() {
-                let col = columns[g][a];
-                x[col * t + u] = scale[col] * v;
-            }
+    let mut x = vec![0.0; n.roles.len() * t];
+    for (col, role) in n.roles.iter().enumerate() {
+        let row = match *role {
+            Role::Kept(k) => kept_x.row(k),
+            Role::Eliminated { index, .. } => eliminated_x.row(index),
+        };
+        for (u, v) in row.iter().enumerate() {
+            x[col * t + u] = scale[col] * v;
         }
     }
     x
@@ -441,7 +423,7 @@ pub fn unit_covariance(c: &Calibration) -> Result<Vec<IntrinsicsCovariance>, Unc
     let problem = c.problem();
     let layout = problem.layout();
     let e = problem
-        .evaluate(&c.state, &c.settings, true)
+        .jacobian(&c.state, &c.settings)
         .map_err(|e| UncertaintyError::Jacobian(e.to_string()))?;
     let rows = 2 * c.dataset.observations.len();
     if e.jacobian_rows != rows
