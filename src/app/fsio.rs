@@ -75,6 +75,10 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
 /// replaced by the new set, every other entry is kept.
 pub type Owns = Box<dyn Fn(&str) -> bool>;
 
+/// How each camera's projection-uncertainty map's file name begins
+/// (`uncertainty_<camera>.svg`, written by `app::uncertainty_plot`).
+pub const UNCERTAINTY_MAP_PREFIX: &str = "uncertainty_";
+
 /// The files of one calibration (`calibration.json` and what goes with it).
 pub fn calibration_files() -> Owns {
     Box::new(|name| {
@@ -87,7 +91,7 @@ pub fn calibration_files() -> Owns {
                 | crate::app::exports::COLMAP_FILE
         ) || name.ends_with(".cameramodel")
             || name.ends_with(crate::app::exports::ROS_SUFFIX)
-            || crate::app::uncertainty_plot::is_map(name)
+            || (name.starts_with(UNCERTAINTY_MAP_PREFIX) && name.ends_with(".svg"))
     })
 }
 

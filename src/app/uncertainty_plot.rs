@@ -3,6 +3,7 @@
 //! projection error over the image, with contour lines and a colour bar. The
 //! numbers are `model::uncertainty`'s; this file only draws them.
 use crate::app::exports::file_stem;
+use crate::app::fsio::{write_atomic, UNCERTAINTY_MAP_PREFIX};
 use crate::error::{Error, Result};
 use crate::model::uncertainty::{projection_uncertainty_map, UncertaintyMap};
 use crate::solver::calibrate::Calibration;
@@ -14,12 +15,7 @@ pub const MAP_COLUMNS: usize = 64;
 
 /// The map's file name for a camera.
 pub fn file_name(camera: &str) -> String {
-    format!("uncertainty_{}.svg", file_stem(camera))
-}
-
-/// Whether an output file is one of the maps (for the output set's bookkeeping).
-pub fn is_map(name: &str) -> bool {
-    name.starts_with("uncertainty_") && name.ends_with(".svg")
+    format!("{UNCERTAINTY_MAP_PREFIX}{}.svg", file_stem(camera))
 }
 
 /// Writes every camera's map into `dir`; nothing when the calibration has no
@@ -47,7 +43,7 @@ pub fn write_maps(dir: &Path, c: &Calibration) -> Result<()> {
         let mut svg = String::new();
         draw(&mut svg, &title, &map)
             .map_err(|e| Error::Invalid(format!("{}: plotting failed: {e}", path.display())))?;
-        crate::app::fsio::write_atomic(&path, svg.as_bytes())?;
+        write_atomic(&path, svg.as_bytes())?;
     }
     Ok(())
 }

@@ -568,7 +568,7 @@ pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {
         detector_noise_px: None,
         covariance: Err(UncertaintyError::Jacobian("not computed yet".into())),
     };
-    c.covariance = crate::solver::uncertainty::unit_covariance(&c);
+    c.covariance = crate::solver::covariance::unit_covariance(&c.problem(), &c.state, &c.settings);
     Ok(c)
 }
 

@@ -3,6 +3,7 @@
 //! layer only; knows nothing of files or configs.
 mod bridge;
 pub mod calibrate;
+pub mod covariance;
 pub mod problem;
 pub mod robust;
 mod trust;
