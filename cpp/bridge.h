@@ -3,6 +3,10 @@
 // shared structs, so they are only forward-declared here.
 #pragma once
 
+#include <cstdint>
+#include <memory>
+#include <vector>
+
 #include "rust/cxx.h"
 
 namespace deformcal {
@@ -20,6 +24,27 @@ SolveReport solve(ProblemData& data, const SolveOptions& options);
 // Residuals (observed minus projected, loss not applied) at the current
 // parameters, and optionally the Jacobian over the free parameters.
 Evaluation evaluate(const ProblemData& data, const SolveOptions& options, bool with_jacobian);
+
+// The Jacobian of the weighted residuals (loss not applied) over the free
+// parameters in CRS, rows in observation order, and the residuals; held in C++
+// and read from Rust as slices, since copying element by element into a
+// rust::Vec costs more than computing it.
+struct Jacobian {
+  std::vector<double> residuals;
+  size_t cols = 0;
+  std::vector<uint32_t> row_ptr, col_idx, col_param;
+  std::vector<double> values;
+
+  rust::Slice<const double> residual_values() const { return {residuals.data(), residuals.size()}; }
+  size_t num_cols() const { return cols; }
+  rust::Slice<const uint32_t> row_offsets() const { return {row_ptr.data(), row_ptr.size()}; }
+  rust::Slice<const uint32_t> column_indices() const { return {col_idx.data(), col_idx.size()}; }
+  rust::Slice<const double> entries() const { return {values.data(), values.size()}; }
+  rust::Slice<const uint32_t> column_parameters() const { return {col_param.data(), col_param.size()}; }
+};
+
+// Evaluates the Jacobian directly from the cost functions (see DirectJacobian).
+std::unique_ptr<Jacobian> jacobian(const ProblemData& data, const SolveOptions& options);
 
 // The C++ registries, exposed so that a test can check them against Rust's.
 size_t lens_num_params(rust::Str model);

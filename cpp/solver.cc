@@ -17,6 +17,7 @@
 #include <stdexcept>
 #include <string>
 #include <type_traits>
+#include <unordered_map>
 #include <utility>
 #include <vector>
 
@@ -445,10 +446,47 @@ ceres::Solver::Options MakeSolverOptions(const ffi::SolveOptions& o) {
   return s;
 }
 
+// The index in the parameter buffer (which starts at `base`) of every Jacobian
+// column of `blocks`, in order.  A column is one tangent coordinate; every manifold
+// deformcal sets is a SubsetManifold, whose tangent coordinates are the free values
+// in order, read here off its PlusJacobian so no other manifold is silently misread.
+std::vector<uint32_t> ColumnParameters(const ceres::Problem& problem,
+                                       const std::vector<double*>& blocks, const double* base) {
+  std::vector<uint32_t> out;
+  for (double* b : blocks) {
+    const uint32_t offset = static_cast<uint32_t>(b - base);
+    const int n = problem.ParameterBlockSize(b);
+    const ceres::Manifold* m = problem.GetManifold(b);
+    if (m == nullptr) {
+      for (int i = 0; i < n; ++i) out.push_back(offset + static_cast<uint32_t>(i));
+      continue;
+    }
+    const int t = m->TangentSize();
+    std::vector<double> plus(static_cast<size_t>(n) * t);
+    if (!m->PlusJacobian(b, plus.data())) Fail("a manifold's Jacobian could not be evaluated");
+    for (int c = 0; c < t; ++c) {
+      int row = -1;
+      for (int r = 0; r < n; ++r) {
+        const double v = plus[static_cast<size_t>(r) * t + c];
+        if (v == 1.0 && row < 0) {
+          row = r;
+        } else if (v != 0.0) {
+          Fail("a parameter block's manifold is not a subset of its values");
+        }
+      }
+      if (row < 0) Fail("a parameter block's manifold is not a subset of its values");
+      out.push_back(offset + static_cast<uint32_t>(row));
+    }
+  }
+  return out;
+}
+
 // Residuals (loss not applied) in observation order; Ceres orders them by block.
-// With `jacobian`, also the Jacobian over the free parameter blocks.
+// With `jacobian`, also the Jacobian over the free parameter blocks, whose columns'
+// buffer indices go to `columns`.
 bool OrderedResiduals(Assembled& a, size_t num_observations, int threads, double* cost,
-                      std::vector<double>* out, ceres::CRSMatrix* jacobian) {
+                      std::vector<double>* out, ceres::CRSMatrix* jacobian,
+                      const double* base = nullptr, std::vector<uint32_t>* columns = nullptr) {
   ceres::Problem::EvaluateOptions e;
   e.residual_blocks = a.residuals;
   e.apply_loss_function = false;
@@ -459,6 +497,7 @@ bool OrderedResiduals(Assembled& a, size_t num_observations, int threads, double
     for (double* b : all) {
       if (!a.problem->IsParameterBlockConstant(b)) e.parameter_blocks.push_back(b);
     }
+    if (columns != nullptr) *columns = ColumnParameters(*a.problem, e.parameter_blocks, base);
   }
   std::vector<double> by_block;
   if (!a.problem->Evaluate(e, cost, &by_block, nullptr, jacobian)) return false;
@@ -471,6 +510,97 @@ bool OrderedResiduals(Assembled& a, size_t num_observations, int threads, double
     }
   }
   return true;
+}
+
+// The free blocks' columns: per block its first column and the value offsets of
+// its tangent coordinates (ColumnParameters' reading of its manifold).
+struct FreeColumns {
+  std::unordered_map<const double*, std::pair<uint32_t, std::vector<int>>> blocks;
+  std::vector<uint32_t> params;  // per column: the buffer index it differentiates
+};
+
+FreeColumns FreeColumnsOf(const ceres::Problem& problem, const double* base) {
+  std::vector<double*> all;
+  problem.GetParameterBlocks(&all);
+  FreeColumns f;
+  for (double* b : all) {
+    if (problem.IsParameterBlockConstant(b)) continue;
+    const std::vector<uint32_t> cols = ColumnParameters(problem, {b}, base);
+    std::vector<int> coords;
+    for (uint32_t c : cols) coords.push_back(static_cast<int>(c - static_cast<uint32_t>(b - base)));
+    f.blocks.emplace(b, std::make_pair(static_cast<uint32_t>(f.params.size()), std::move(coords)));
+    f.params.insert(f.params.end(), cols.begin(), cols.end());
+  }
+  return f;
+}
+
+// The Jacobian of the residuals (loss not applied) over the free parameters, in
+// CRS with one row per residual in observation order, straight from the cost
+// functions.  Problem::Evaluate gives the same numbers, but builds a program and
+// a sparse matrix first, which costs several times the evaluation itself.
+void DirectJacobian(const Assembled& a, const double* base, size_t num_observations,
+                    ffi::Jacobian& out) {
+  const ceres::Problem& problem = *a.problem;
+  const FreeColumns f = FreeColumnsOf(problem, base);
+  // Rows come block by block; observation i's two rows go to rows 2i, 2i+1.
+  std::vector<uint32_t> cols;
+  std::vector<double> vals;
+  std::vector<std::pair<uint32_t, uint32_t>> spans(2 * num_observations);  // into cols/vals
+  out.residuals.assign(2 * num_observations, 0.0);
+  std::vector<double*> blocks;
+  std::vector<std::vector<double>> jac;
+  std::vector<double*> jac_ptr;
+  std::vector<const std::pair<uint32_t, std::vector<int>>*> free;
+  std::vector<double> r;
+  for (size_t k = 0; k < a.residuals.size(); ++k) {
+    const ceres::CostFunction* cost = problem.GetCostFunctionForResidualBlock(a.residuals[k]);
+    problem.GetParameterBlocksForResidualBlock(a.residuals[k], &blocks);
+    const std::vector<int32_t>& sizes = cost->parameter_block_sizes();
+    const int nres = cost->num_residuals();
+    jac.resize(blocks.size());
+    jac_ptr.assign(blocks.size(), nullptr);
+    free.assign(blocks.size(), nullptr);
+    for (size_t b = 0; b < blocks.size(); ++b) {
+      jac[b].assign(static_cast<size_t>(nres) * sizes[b], 0.0);
+      const auto it = f.blocks.find(blocks[b]);
+      if (it != f.blocks.end()) {
+        jac_ptr[b] = jac[b].data();
+        free[b] = &it->second;
+      }
+    }
+    r.assign(nres, 0.0);
+    if (!cost->Evaluate(blocks.data(), r.data(), jac_ptr.data())) {
+      Fail("the residuals could not be evaluated (a point behind the camera?)");
+    }
+    const std::vector<uint32_t>& obs = a.block_observations[k];
+    if (static_cast<size_t>(nres) != 2 * obs.size()) Fail("a residual block does not have 2 rows per observation");
+    for (int row = 0; row < nres; ++row) {
+      const size_t target = 2 * obs[row / 2] + row % 2;
+      out.residuals[target] = r[row];
+      spans[target].first = static_cast<uint32_t>(cols.size());
+      for (size_t b = 0; b < blocks.size(); ++b) {
+        if (free[b] == nullptr) continue;
+        const auto& [first, coords] = *free[b];
+        const double* jrow = jac[b].data() + static_cast<size_t>(row) * sizes[b];
+        for (size_t j = 0; j < coords.size(); ++j) {
+          cols.push_back(first + static_cast<uint32_t>(j));
+          vals.push_back(jrow[coords[j]]);
+        }
+      }
+      spans[target].second = static_cast<uint32_t>(cols.size());
+    }
+  }
+  out.cols = f.params.size();
+  out.col_idx.reserve(cols.size());
+  out.values.reserve(vals.size());
+  out.row_ptr.reserve(spans.size() + 1);
+  out.row_ptr.push_back(0);
+  for (const auto& [lo, hi] : spans) {
+    out.col_idx.insert(out.col_idx.end(), cols.begin() + lo, cols.begin() + hi);
+    out.values.insert(out.values.end(), vals.begin() + lo, vals.begin() + hi);
+    out.row_ptr.push_back(static_cast<uint32_t>(out.col_idx.size()));
+  }
+  out.col_param = f.params;
 }
 
 }  // namespace
@@ -526,8 +656,9 @@ Evaluation evaluate(const ProblemData& data, const SolveOptions& options, bool w
   double cost = 0.0;
   std::vector<double> ordered;
   ceres::CRSMatrix jacobian;
+  std::vector<uint32_t> columns;
   if (!OrderedResiduals(a, data.obs_uv.size() / 2, options.num_threads, &cost, &ordered,
-                        with_jacobian ? &jacobian : nullptr)) {
+                        with_jacobian ? &jacobian : nullptr, params.storage.data(), &columns)) {
     Fail("the residuals could not be evaluated (a point behind the camera?)");
   }
   Evaluation out;
@@ -539,7 +670,17 @@ Evaluation evaluate(const ProblemData& data, const SolveOptions& options, bool w
     for (int v : jacobian.rows) out.jacobian_row_ptr.push_back(static_cast<uint32_t>(v));
     for (int v : jacobian.cols) out.jacobian_col_idx.push_back(static_cast<uint32_t>(v));
     for (double v : jacobian.values) out.jacobian_values.push_back(v);
+    for (uint32_t c : columns) out.jacobian_col_param.push_back(c);
   }
+  return out;
+}
+
+std::unique_ptr<Jacobian> jacobian(const ProblemData& data, const SolveOptions& options) {
+  ValidateProblem(data, options);
+  Params params(data);
+  Assembled a = Assemble(data, options, params);
+  auto out = std::make_unique<Jacobian>();
+  DirectJacobian(a, params.storage.data(), data.obs_uv.size() / 2, *out);
   return out;
 }
 

@@ -3,6 +3,7 @@
 use crate::model::board::Paraboloid;
 use crate::model::lens::{Intrinsics, LensModel};
 use crate::model::selection::Selection;
+use crate::model::uncertainty::CameraUncertainty;
 use crate::solver::calibrate::{Calibration, Stage};
 use serde::{Deserialize, Deserializer, Serialize};
 
@@ -25,6 +26,86 @@ pub struct CameraJson {
     /// This camera's RMSE over its own observations (SPEC §3's `rmse_px`, per camera).
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub rmse_px: Option<f64>,
+    /// What the noise alone leaves uncertain (SPEC §3a); absent when unavailable
+    /// (the reason is in `uncertainty_note`).
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub uncertainty: Option<UncertaintyJson>,
+}
+
+/// One camera's uncertainty in `calibration.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct UncertaintyJson {
+    /// σ of each estimated lens parameter, in the parameter's unit; parameters
+    /// held at their values (`fix`) are not listed.
+    pub intrinsics_std: NamedValues,
+    #[serde(deserialize_with = "nan_if_null")]
+    pub expected_mapping_error_px: f64,
+    #[serde(deserialize_with = "nan_if_null")]
+    pub expected_mapping_error_rot_px: f64,
+}
+
+impl From<&CameraUncertainty> for UncertaintyJson {
+    fn from(u: &CameraUncertainty) -> Self {
+        UncertaintyJson {
+            intrinsics_std: NamedValues(
+                u.intrinsics_std
+                    .iter()
+                    .map(|(n, v)| (n.to_string(), *v))
+                    .collect(),
+            ),
+            expected_mapping_error_px: u.expected_mapping_error_px,
+            expected_mapping_error_rot_px: u.expected_mapping_error_rot_px,
+        }
+    }
+}
+
+/// A JSON object of numbers that keeps its keys in the order written (the lens
+/// parameters' order), unlike a map type.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct NamedValues(pub Vec<(String, f64)>);
+
+impl NamedValues {
+    /// The value of `name`, if listed.
+    pub fn get(&self, name: &str) -> Option<f64> {
+        self.0.iter().find(|(n, _)| n == name).map(|(_, v)| *v)
+    }
+}
+
+impl Serialize for NamedValues {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap;
+        let mut map = s.serialize_map(Some(self.0.len()))?;
+        for (name, v) in &self.0 {
+            map.serialize_entry(name, v)?;
+        }
+        map.end()
+    }
+}
+
+impl<'de> Deserialize<'de> for NamedValues {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Visitor;
+        impl<'de> serde::de::Visitor<'de> for Visitor {
+            type Value = NamedValues;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("an object of numbers")
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(
+                self,
+                mut map: A,
+            ) -> Result<Self::Value, A::Error> {
+                let mut out = Vec::new();
+                while let Some((name, v)) = map.next_entry::<String, Option<f64>>()? {
+                    if out.iter().any(|(n, _): &(String, f64)| *n == name) {
+                        return Err(serde::de::Error::custom(format!("`{name}` is given twice")));
+                    }
+                    out.push((name, v.unwrap_or(f64::NAN)));
+                }
+                Ok(NamedValues(out))
+            }
+        }
+        d.deserialize_map(Visitor)
+    }
 }
 
 impl CalibrationJson {
@@ -99,6 +180,9 @@ pub struct CalibrationJson {
     /// Free parameters after the gauge.
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub parameters: Option<usize>,
+    /// Why the cameras have no `uncertainty` (a singular problem, no noise estimate).
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub uncertainty_note: Option<String>,
     pub converged: bool,
     pub iterations: i32,
     #[serde(deserialize_with = "nan_if_null")]
@@ -154,6 +238,32 @@ impl From<&Stage> for StageJson {
     }
 }
 
+/// The cameras of a calibration, with their uncertainty where there is one.
+fn cameras_json(
+    c: &Calibration,
+    uncertainty: Option<&Vec<CameraUncertainty>>,
+    rmse: &[Option<f64>],
+) -> Vec<CameraJson> {
+    c.dataset
+        .cameras
+        .iter()
+        .enumerate()
+        .map(|(k, cam)| CameraJson {
+            name: cam.name.clone(),
+            model: cam.model,
+            width: cam.width,
+            height: cam.height,
+            intrinsics: c.state.intrinsics[k],
+            rotation: c.state.camera_poses[k].rotation,
+            translation: c.state.camera_poses[k].translation,
+            rmse_px: rmse[k],
+            uncertainty: uncertainty
+                .and_then(|u| u.get(k))
+                .map(UncertaintyJson::from),
+        })
+        .collect()
+}
+
 impl From<&Calibration> for CalibrationJson {
     fn from(c: &Calibration) -> Self {
         let d = &c.dataset;
@@ -168,6 +278,12 @@ impl From<&Calibration> for CalibrationJson {
         }
         let bends = c.method.has_paraboloid();
         let trust = c.trust(c.detector_noise_px);
+        let uncertainty = c.uncertainty();
+        let camera_rmse: Vec<Option<f64>> = cam_sq
+            .iter()
+            .zip(&cam_n)
+            .map(|(sq, &n)| (n > 0).then(|| (sq / n as f64).sqrt()))
+            .collect();
         CalibrationJson {
             method: c.method.name().into(),
             rmse_px: c.rmse_px,
@@ -178,24 +294,14 @@ impl From<&Calibration> for CalibrationJson {
             bias_ratio: trust.map(|t| t.bias_ratio),
             g_aic: trust.map(|t| t.g_aic),
             parameters: trust.map(|t| t.parameters),
+            uncertainty_note: uncertainty
+                .as_ref()
+                .err()
+                .map(|e| format!("uncertainty unavailable: {e}")),
             converged: c.converged,
             iterations: c.iterations(),
             seconds: c.seconds,
-            cameras: d
-                .cameras
-                .iter()
-                .enumerate()
-                .map(|(k, cam)| CameraJson {
-                    name: cam.name.clone(),
-                    model: cam.model,
-                    width: cam.width,
-                    height: cam.height,
-                    intrinsics: c.state.intrinsics[k],
-                    rotation: c.state.camera_poses[k].rotation,
-                    translation: c.state.camera_poses[k].translation,
-                    rmse_px: (cam_n[k] > 0).then(|| (cam_sq[k] / cam_n[k] as f64).sqrt()),
-                })
-                .collect(),
+            cameras: cameras_json(c, uncertainty.as_ref().ok(), &camera_rmse),
             frames: (0..d.num_frames())
                 .map(|j| {
                     let pose = c.state.frame_poses[j];

@@ -47,8 +47,9 @@ impl CameraDiff {
 }
 
 /// The expected mapping errors a camera's file records, if any.
-fn expected(_cam: &CameraJson) -> Option<(f64, f64)> {
-    None // MERGE: read cam.uncertainty once the trust branch lands
+fn expected(cam: &CameraJson) -> Option<(f64, f64)> {
+    let u = cam.uncertainty.as_ref()?;
+    Some((u.expected_mapping_error_px, u.expected_mapping_error_rot_px))
 }
 
 /// Every camera of `a` that `b` has too (same name, model may differ, same size).

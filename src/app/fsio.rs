@@ -75,6 +75,10 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
 /// replaced by the new set, every other entry is kept.
 pub type Owns = Box<dyn Fn(&str) -> bool>;
 
+/// How each camera's projection-uncertainty map's file name begins
+/// (`uncertainty_<camera>.svg`, written by `app::uncertainty_plot`).
+pub const UNCERTAINTY_MAP_PREFIX: &str = "uncertainty_";
+
 /// The files of one protocol run.
 pub fn protocol_files() -> Owns {
     Box::new(|name| {

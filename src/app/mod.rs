@@ -19,3 +19,4 @@ pub mod protocol;
 pub mod protocol_report;
 pub mod report;
 pub mod source;
+pub mod uncertainty_plot;

@@ -30,16 +30,20 @@ pub fn calibration_files() -> crate::app::fsio::Owns {
                 | crate::app::exports::COLMAP_FILE
         ) || name.ends_with(".cameramodel")
             || name.ends_with(crate::app::exports::ROS_SUFFIX)
+            || (name.starts_with(crate::app::fsio::UNCERTAINTY_MAP_PREFIX)
+                && name.ends_with(".svg"))
     })
 }
 
 /// Writes `calibration.json`, its exports (see [`write_models`]; the mrcal models
-/// with the problem as `optimization_inputs` where mrcal can represent it) and
-/// `outliers.csv` into `dir` (created if needed); returns the JSON's path.
+/// with the problem as `optimization_inputs` where mrcal can represent it),
+/// `outliers.csv` and each camera's projection-uncertainty map into `dir`
+/// (created if needed); returns the JSON's path.
 pub fn write_calibration(dir: &Path, c: &Calibration) -> Result<Written> {
     let inputs = exports::optimization_inputs(c);
     let written = write_models(dir, &CalibrationJson::from(c), &inputs)?;
     write_atomic(&dir.join("outliers.csv"), &suspects_csv(c)?)?;
+    crate::app::uncertainty_plot::write_maps(dir, c)?;
     Ok(written)
 }
 

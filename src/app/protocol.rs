@@ -11,6 +11,7 @@ use crate::model::metrics::{mapping_error, mapping_error_rot};
 use crate::model::state::State;
 use crate::model::synthetic::Truth;
 use crate::model::target::Target;
+use crate::model::uncertainty::CameraUncertainty;
 use crate::solver::calibrate::{calibrate, Calibration, Request};
 use crate::solver::problem::{rmse, Hold, Problem, SolverSettings};
 use rand::{RngCore, SeedableRng};
@@ -135,6 +136,9 @@ pub struct Row {
     pub deformations: Vec<Paraboloid>,
     /// `max_out_of_plane_m` per image (methods that have a paraboloid).
     pub max_out_of_plane_m: Vec<f64>,
+    /// The share of the residual the noise does not explain (SPEC §3a).
+    #[serde(default)]
+    pub bias_ratio: Option<f64>,
 }
 
 /// One camera's results in a [`Row`].
@@ -148,6 +152,12 @@ pub struct CameraRow {
     pub mapping_error_rot_px: Option<f64>,
     pub truth_mapping_error_px: Option<f64>,
     pub truth_mapping_error_rot_px: Option<f64>,
+    /// The mapping error to the truth the noise alone is expected to leave (SPEC §3a).
+    #[serde(default)]
+    pub expected_mapping_error_px: Option<f64>,
+    /// The same with the virtual rotation profiled out.
+    #[serde(default)]
+    pub expected_mapping_error_rot_px: Option<f64>,
 }
 
 impl Row {
@@ -256,6 +266,9 @@ pub struct Setup {
     pub settings: SolverSettings,
     /// Warnings about the configuration (a reference set that is the training data).
     pub warnings: Vec<String>,
+    /// `[calibration] detector_noise_px`: σ̂ of the bias ratio and the uncertainty
+    /// (estimated per subset when `None`).
+    pub detector_noise_px: Option<f64>,
 }
 
 /// Loads the data, runs the reference calibration and draws the subsets.
@@ -327,6 +340,7 @@ pub fn prepare(config: &Config, protocol: &ProtocolConfig) -> Result<Setup> {
         subsets,
         settings,
         warnings,
+        detector_noise_px: config.calibration.detector_noise_px,
     })
 }
 
@@ -400,7 +414,13 @@ pub fn test_rmse(
 
 impl Setup {
     /// Camera `k`'s results in `c`; a failed test error is recorded in the row's `error`.
-    fn camera_row(&self, c: &Calibration, k: usize, error: &mut Option<String>) -> CameraRow {
+    fn camera_row(
+        &self,
+        c: &Calibration,
+        k: usize,
+        uncertainty: Option<&CameraUncertainty>,
+        error: &mut Option<String>,
+    ) -> CameraRow {
         let cam = &self.header.cameras[k];
         let theta = c.state.intrinsics[k];
         let (w, h) = (cam.width, cam.height);
@@ -433,6 +453,10 @@ impl Setup {
             mapping_error_rot_px: mapping_rot,
             truth_mapping_error_px: truth,
             truth_mapping_error_rot_px: truth_rot,
+            expected_mapping_error_px: uncertainty
+                .and_then(|u| finite(u.expected_mapping_error_px)),
+            expected_mapping_error_rot_px: uncertainty
+                .and_then(|u| finite(u.expected_mapping_error_rot_px)),
         }
     }
 
@@ -454,13 +478,14 @@ impl Setup {
             frames: data.frame_ids.clone(),
             deformations: Vec::new(),
             max_out_of_plane_m: Vec::new(),
+            bias_ratio: None,
         };
         let request = Request {
             method,
             settings: self.settings.clone(),
             gauge: None,
         };
-        let c = match calibrate(&data, &request) {
+        let mut c = match calibrate(&data, &request) {
             Ok(c) => c,
             Err(e) => {
                 row.error = Some(e.to_string());
@@ -473,8 +498,12 @@ impl Setup {
         row.converged = c.converged;
         row.iterations = c.iterations();
         row.rmse_px = Some(c.rmse_px);
+        c.detector_noise_px = self.detector_noise_px;
+        row.bias_ratio = c.trust(c.detector_noise_px).map(|t| t.bias_ratio);
+        let uncertainty = c.uncertainty().ok();
         for k in 0..self.header.cameras.len() {
-            let camera = self.camera_row(&c, k, &mut row.error);
+            let u = uncertainty.as_ref().and_then(|u| u.get(k));
+            let camera = self.camera_row(&c, k, u, &mut row.error);
             row.cameras.push(camera);
         }
         if method.has_paraboloid() {

@@ -138,27 +138,46 @@ pub fn verdict(sel: &Selection, c: &Calibration) -> String {
             1e3 * worst
         ));
     }
-    parts.push(format!(
-        "modelling it moves the projection by {:.2} px",
-        sel.projection_shift_px
-    ));
+    let expected = c.uncertainty().ok().map(|u| {
+        u.iter()
+            .map(|x| x.expected_mapping_error_px)
+            .fold(0.0, f64::max)
+    });
+    parts.push(match expected {
+        Some(e) if e > 0.0 => format!(
+            "modelling it moves the projection by {:.2} px, {:.0}× the calibration's uncertainty ({:.3} px)",
+            sel.projection_shift_px,
+            sel.projection_shift_px / e,
+            e
+        ),
+        _ => format!(
+            "modelling it moves the projection by {:.2} px",
+            sel.projection_shift_px
+        ),
+    });
     format!("{}: use `{}`", parts.join("; "), sel.chosen)
 }
 
 /// One line per camera: its size, lens model and intrinsics.
+/// One line per camera: its size, lens model and intrinsics with their 1-σ
+/// uncertainty, then the expected mapping error (SPEC §3a).
 fn write_cameras(s: &mut String, c: &Calibration) {
     let d = &c.dataset;
+    let uncertainty = c.uncertainty();
     for (k, cam) in d.cameras.iter().enumerate() {
         let i = c.state.intrinsics[k];
+        let u = uncertainty.as_ref().ok().and_then(|u| u.get(k));
         let values: Vec<String> = i
             .named()
             .enumerate()
             // Pixels (fx, fy, cx, cy) to 2 decimals, coefficients to 5.
             .map(|(n, (name, v))| {
-                if n < 4 {
-                    format!("{name} {v:.2}")
-                } else {
-                    format!("{name} {v:.5}")
+                let digits = if n < 4 { 2 } else { 5 };
+                let sigma = u.map(|u| u.intrinsics_std.iter().find(|(p, _)| *p == name));
+                match sigma {
+                    Some(Some((_, e))) => format!("{name} {v:.digits$} ± {e:.digits$}"),
+                    Some(None) => format!("{name} {v:.digits$} (held)"),
+                    None => format!("{name} {v:.digits$}"),
                 }
             })
             .collect();
@@ -171,6 +190,18 @@ fn write_cameras(s: &mut String, c: &Calibration) {
             cam.model,
             values.join("  ")
         );
+        if let Some(u) = u {
+            let _ = writeln!(
+                s,
+                "    expected mapping error {:.3} px ({:.3} px with the rotation removed): the noise alone leaves this much; map in {}",
+                u.expected_mapping_error_px,
+                u.expected_mapping_error_rot_px,
+                crate::app::uncertainty_plot::file_name(&cam.name)
+            );
+        }
+    }
+    if let Err(e) = uncertainty {
+        let _ = writeln!(s, "  uncertainty unavailable: {e}");
     }
 }
 

@@ -5,8 +5,9 @@ use nalgebra::{Matrix3, Rotation3, Vector2, Vector3};
 /// Grid step of the mapping error in pixels.
 pub const MAPPING_GRID_STEP_PX: u32 = 20;
 
-/// The rays of a regular pixel grid under `a`, with their pixels.
-fn grid_rays(a: &Intrinsics, width: u32, height: u32) -> Vec<(Vector2<f64>, Vector3<f64>)> {
+/// The rays of the mapping-error grid (every [`MAPPING_GRID_STEP_PX`] px from the
+/// top-left pixel) under `a`, with their pixels; pixels without a ray are left out.
+pub fn grid_rays(a: &Intrinsics, width: u32, height: u32) -> Vec<(Vector2<f64>, Vector3<f64>)> {
     let mut out = Vec::new();
     for v in (0..height).step_by(MAPPING_GRID_STEP_PX as usize) {
         for u in (0..width).step_by(MAPPING_GRID_STEP_PX as usize) {

@@ -13,4 +13,5 @@ pub mod state;
 pub mod synthetic;
 pub mod target;
 pub mod trust;
+pub mod uncertainty;
 pub mod zhang;

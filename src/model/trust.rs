@@ -3,7 +3,7 @@
 //! geometric AIC. Pure arithmetic on residuals; what a residual is and how many
 //! parameters were free is the caller's.
 use crate::model::dataset::Dataset;
-use std::collections::HashMap;
+use std::collections::BTreeMap;
 
 /// The noise, bias and G-AIC figures of one calibration.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
@@ -33,7 +33,9 @@ pub struct Trust {
 /// and columns of the board both give triples. `None` with no triple.
 pub fn noise_from_neighbours(dataset: &Dataset, residuals: &[f64]) -> Option<f64> {
     let cols = dataset.target.cols;
-    let mut at: HashMap<(usize, usize, usize), [f64; 2]> = HashMap::new();
+    // Ordered, so that the sum, and every figure scaled by σ̂, is the same in
+    // every run (a hash map's order changes from process to process).
+    let mut at: BTreeMap<(usize, usize, usize), [f64; 2]> = BTreeMap::new();
     for (o, r) in dataset.observations.iter().zip(residuals.chunks_exact(2)) {
         at.insert((o.camera, o.frame, o.corner), [r[0], r[1]]);
     }

@@ -94,6 +94,9 @@ pub mod ffi {
         jacobian_row_ptr: Vec<u32>,
         jacobian_col_idx: Vec<u32>,
         jacobian_values: Vec<f64>,
+        /// Per Jacobian column: the index in `ProblemData::params` of the value it
+        /// differentiates (held values have no column).
+        jacobian_col_param: Vec<u32>,
     }
 
     unsafe extern "C++" {
@@ -108,6 +111,20 @@ pub mod ffi {
             options: &SolveOptions,
             with_jacobian: bool,
         ) -> Result<Evaluation>;
+
+        /// A Jacobian held in C++ (CRS over the free parameters, rows in observation order).
+        type Jacobian;
+        /// The weighted residuals, loss not applied.
+        fn residual_values(self: &Jacobian) -> &[f64];
+        fn num_cols(self: &Jacobian) -> usize;
+        fn row_offsets(self: &Jacobian) -> &[u32];
+        fn column_indices(self: &Jacobian) -> &[u32];
+        fn entries(self: &Jacobian) -> &[f64];
+        /// Per column: the index in `ProblemData::params` of the value it differentiates.
+        fn column_parameters(self: &Jacobian) -> &[u32];
+
+        /// The Jacobian straight from the cost functions.
+        fn jacobian(data: &ProblemData, options: &SolveOptions) -> Result<UniquePtr<Jacobian>>;
 
         // Only the cross-language registry tests call this.
         #[allow(dead_code)]

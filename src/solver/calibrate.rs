@@ -6,6 +6,7 @@ use crate::model::dataset::Dataset;
 use crate::model::lens::Intrinsics;
 use crate::model::pose::Pose;
 use crate::model::selection::Selection;
+use crate::model::uncertainty::{IntrinsicsCovariance, UncertaintyError};
 use crate::model::{fisheye_init, zhang};
 use crate::solver::problem::{
     choose_gauge, rmse, underobserved_corners, Hold, Problem, SolveReport, SolverSettings, State,
@@ -87,6 +88,8 @@ pub struct Calibration {
     pub detector_noise_px: Option<f64>,
     /// With `method = "auto"`: why this method was chosen, and every candidate's figures.
     pub selection: Option<Selection>,
+    /// Σ_θ of each camera at unit noise (see `solver::uncertainty`), or why there is none.
+    pub covariance: std::result::Result<Vec<IntrinsicsCovariance>, UncertaintyError>,
 }
 
 /// An observation the robust loss down-weighted, or (without a loss) one far off.
@@ -544,7 +547,7 @@ pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {
             stages.last().map(|s| s.message.as_str()).unwrap_or("")
         ));
     }
-    Ok(Calibration {
+    let mut c = Calibration {
         method: request.method,
         rmse_px: rmse(&residuals),
         residuals,
@@ -562,7 +565,10 @@ pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {
         rejected,
         detector_noise_px: None,
         selection: None,
-    })
+        covariance: Err(UncertaintyError::Jacobian("not computed yet".into())),
+    };
+    c.covariance = crate::solver::covariance::unit_covariance(&c.problem(), &c.state, &c.settings);
+    Ok(c)
 }
 
 /// What [`finish_robustly`] hands back: the data kept, their residuals, the frozen

@@ -3,7 +3,9 @@
 //! layer only; knows nothing of files or configs.
 mod bridge;
 pub mod calibrate;
+pub mod covariance;
 pub mod problem;
 pub mod robust;
 pub mod select;
 mod trust;
+pub mod uncertainty;

@@ -301,6 +301,27 @@ impl Problem<'_> {
         Ok(e)
     }
 
+    /// The weighted residuals' Jacobian over the free parameters, rows in
+    /// observation order (two per observation), and the residuals in pixels (weights
+    /// undone). The same numbers as [`Problem::evaluate`]'s, several times faster; `cost` is NaN.
+    pub fn jacobian(&self, state: &State, settings: &SolverSettings) -> Result<Evaluation> {
+        let data = self.data(state, &self.layout())?;
+        let j = ffi::jacobian(&data, &settings.options())
+            .map_err(|e| Error::Problem(e.what().to_string()))?;
+        let mut e = Evaluation {
+            cost: f64::NAN,
+            residuals: j.residual_values().to_vec(),
+            jacobian_rows: j.row_offsets().len().saturating_sub(1),
+            jacobian_cols: j.num_cols(),
+            jacobian_row_ptr: j.row_offsets().to_vec(),
+            jacobian_col_idx: j.column_indices().to_vec(),
+            jacobian_values: j.entries().to_vec(),
+            jacobian_col_param: j.column_parameters().to_vec(),
+        };
+        self.unweight(&mut e.residuals);
+        Ok(e)
+    }
+
     /// Residuals in pixels from weighted ones.
     fn unweight(&self, residuals: &mut [f64]) {
         for (r, o) in residuals.chunks_mut(2).zip(&self.dataset.observations) {

@@ -53,7 +53,7 @@ fn unrepresentable(format: &str, c: &CameraJson) -> String {
 }
 
 /// A camera name made safe for a file name: path separators replaced.
-fn file_stem(camera: &str) -> String {
+pub fn file_stem(camera: &str) -> String {
     camera
         .chars()
         .map(|c| {

@@ -1,0 +1,276 @@
+//! The projection-uncertainty map of each camera as an SVG heat map
+//! (`uncertainty_<camera>.svg` beside `calibration.json`): the predicted 1-σ
+//! projection error over the image, with contour lines and a colour bar. The
+//! numbers are `model::uncertainty`'s; this file only draws them.
+use crate::app::exports::file_stem;
+use crate::app::fsio::{write_atomic, UNCERTAINTY_MAP_PREFIX};
+use crate::error::{Error, Result};
+use crate::model::uncertainty::{projection_uncertainty_map, UncertaintyMap};
+use crate::solver::calibrate::Calibration;
+use plotters::prelude::*;
+use std::path::Path;
+
+/// Cells across the image in the map.
+pub const MAP_COLUMNS: usize = 64;
+
+/// The map's file name for a camera.
+pub fn file_name(camera: &str) -> String {
+    format!("{UNCERTAINTY_MAP_PREFIX}{}.svg", file_stem(camera))
+}
+
+/// Writes every camera's map into `dir`; nothing when the calibration has no
+/// uncertainty (its summary and `calibration.json` say why).
+pub fn write_maps(dir: &Path, c: &Calibration) -> Result<()> {
+    let Ok(covariance) = c.intrinsics_covariance() else {
+        return Ok(());
+    };
+    let noise = c
+        .trust(c.detector_noise_px)
+        .map_or(f64::NAN, |t| t.noise_px);
+    for ((cam, k), sigma) in c
+        .dataset
+        .cameras
+        .iter()
+        .zip(&c.state.intrinsics)
+        .zip(&covariance)
+    {
+        let map = projection_uncertainty_map(k, sigma, cam.width, cam.height, MAP_COLUMNS);
+        let title = format!(
+            "{}: predicted 1-σ projection error, worst direction (px); noise {noise:.3} px",
+            cam.name
+        );
+        let path = dir.join(file_name(&cam.name));
+        let mut svg = String::new();
+        draw(&mut svg, &title, &map)
+            .map_err(|e| Error::Invalid(format!("{}: plotting failed: {e}", path.display())))?;
+        write_atomic(&path, svg.as_bytes())?;
+    }
+    Ok(())
+}
+
+/// Viridis, sampled at nine points (matplotlib's table).
+const VIRIDIS: [(u8, u8, u8); 9] = [
+    (68, 1, 84),
+    (71, 44, 122),
+    (59, 81, 139),
+    (44, 113, 142),
+    (33, 144, 141),
+    (39, 173, 129),
+    (92, 200, 99),
+    (170, 220, 50),
+    (253, 231, 37),
+];
+
+fn viridis(t: f64) -> RGBColor {
+    let t = if t.is_finite() {
+        t.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let x = t * (VIRIDIS.len() - 1) as f64;
+    let i = (x.floor() as usize).min(VIRIDIS.len() - 2);
+    let f = x - i as f64;
+    let (a, b) = (VIRIDIS[i], VIRIDIS[i + 1]);
+    let mix = |p: u8, q: u8| (p as f64 + (q as f64 - p as f64) * f).round() as u8;
+    RGBColor(mix(a.0, b.0), mix(a.1, b.1), mix(a.2, b.2))
+}
+
+/// Contour levels at a round step (1, 2, 2.5 or 5 × 10ⁿ), about eight from below
+/// `lo` to above `hi`: the colours then span the map's own range, which for a
+/// well-calibrated camera is narrow and far from zero.
+pub fn levels(lo: f64, hi: f64) -> Vec<f64> {
+    if !(hi > 0.0 && hi.is_finite() && lo.is_finite()) {
+        return vec![0.0, 1.0];
+    }
+    // A nearly flat map is shown from zero, where its level is the news.
+    let lo = if hi - lo < 0.05 * hi {
+        0.0
+    } else {
+        lo.max(0.0)
+    };
+    let raw = (hi - lo) / 8.0;
+    let magnitude = 10f64.powf(raw.log10().floor());
+    let step = [1.0, 2.0, 2.5, 5.0, 10.0]
+        .iter()
+        .map(|m| m * magnitude)
+        .find(|s| *s >= raw)
+        .unwrap_or(10.0 * magnitude);
+    let first = (lo / step).floor() as i64;
+    let last = ((hi / step).ceil() as i64).max(first + 1);
+    (first..=last).map(|i| i as f64 * step).collect()
+}
+
+/// Contour segments of `level` over the map's cell centres (marching squares).
+fn contour(map: &UncertaintyMap, level: f64) -> Vec<[(f64, f64); 2]> {
+    let at = |c: usize, r: usize| map.sigma_px[r * map.columns + c];
+    let mut out = Vec::new();
+    for r in 0..map.rows.saturating_sub(1) {
+        for c in 0..map.columns.saturating_sub(1) {
+            let corners = [(c, r), (c + 1, r), (c + 1, r + 1), (c, r + 1)];
+            let values = corners.map(|(c, r)| at(c, r));
+            if values.iter().any(|v| !v.is_finite()) {
+                continue;
+            }
+            let mut crossings = Vec::with_capacity(4);
+            for e in 0..4 {
+                let (a, b) = (values[e], values[(e + 1) % 4]);
+                if (a < level) != (b < level) {
+                    let t = (level - a) / (b - a);
+                    let (pa, pb) = (
+                        map.centre(corners[e].0, corners[e].1),
+                        map.centre(corners[(e + 1) % 4].0, corners[(e + 1) % 4].1),
+                    );
+                    let p = pa + (pb - pa) * t;
+                    crossings.push((p.x, p.y));
+                }
+            }
+            for pair in crossings.chunks_exact(2) {
+                out.push([pair[0], pair[1]]);
+            }
+        }
+    }
+    out
+}
+
+fn err<E: std::fmt::Debug>(e: E) -> String {
+    format!("{e:?}")
+}
+
+/// Draws the heat map, its contours and the colour bar into `svg`.
+fn draw(svg: &mut String, title: &str, map: &UncertaintyMap) -> std::result::Result<(), String> {
+    let (w, h) = (map.width as f64, map.height as f64);
+    let plot_w = 760u32;
+    let plot_h = ((plot_w - 90) as f64 * h / w.max(1.0) + 90.0).clamp(240.0, 1200.0) as u32;
+    let root = SVGBackend::with_string(svg, (plot_w + 130, plot_h)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let (plot, legend) = root.split_horizontally(plot_w);
+    let levels = levels(map.min(), map.max());
+    let (bottom, top) = (levels[0], *levels.last().unwrap_or(&1.0));
+    let mut chart = ChartBuilder::on(&plot)
+        .caption(title, ("sans-serif", 15))
+        .margin(10)
+        .x_label_area_size(40)
+        .y_label_area_size(55)
+        .build_cartesian_2d(-0.5..w - 0.5, h - 0.5..-0.5)
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .x_desc("u (px)")
+        .y_desc("v (px)")
+        .x_label_formatter(&|x| format!("{x:.0}"))
+        .y_label_formatter(&|y| format!("{y:.0}"))
+        .draw()
+        .map_err(err)?;
+    let (cw, ch) = (w / map.columns as f64, h / map.rows as f64);
+    let cells = (0..map.rows).flat_map(|r| (0..map.columns).map(move |c| (c, r)));
+    chart
+        .draw_series(cells.map(|(c, r)| {
+            let v = map.sigma_px[r * map.columns + c];
+            let (x0, y0) = (c as f64 * cw - 0.5, r as f64 * ch - 0.5);
+            let fill = if v.is_finite() {
+                viridis((v - bottom) / (top - bottom))
+            } else {
+                RGBColor(220, 220, 220)
+            };
+            Rectangle::new([(x0, y0), (x0 + cw, y0 + ch)], fill.filled())
+        }))
+        .map_err(err)?;
+    for &level in &levels[1..levels.len().saturating_sub(1).max(1)] {
+        chart
+            .draw_series(
+                contour(map, level)
+                    .into_iter()
+                    .map(|s| PathElement::new(s.to_vec(), BLACK.mix(0.55).stroke_width(1))),
+            )
+            .map_err(err)?;
+    }
+    draw_bar(&legend, &levels).map_err(err)?;
+    root.present().map_err(err)
+}
+
+/// The colour bar, in pixels, with a line at each contour level.
+fn draw_bar<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    levels: &[f64],
+) -> std::result::Result<(), String> {
+    let (bottom, top) = (levels[0], *levels.last().unwrap_or(&1.0));
+    let mut bar = ChartBuilder::on(area)
+        .margin_top(40)
+        .margin_bottom(50)
+        .margin_right(10)
+        .y_label_area_size(60)
+        .caption("1-σ (px)", ("sans-serif", 14))
+        .build_cartesian_2d(0.0..1.0, bottom..top)
+        .map_err(err)?;
+    bar.configure_mesh()
+        .disable_mesh()
+        .disable_x_axis()
+        .y_labels(levels.len())
+        .y_label_style(("sans-serif", 12))
+        .draw()
+        .map_err(err)?;
+    let steps = 64;
+    let span = top - bottom;
+    bar.draw_series((0..steps).map(|k| {
+        let (a, b) = (k as f64 / steps as f64, (k + 1) as f64 / steps as f64);
+        let (ya, yb) = (bottom + span * a, bottom + span * b);
+        Rectangle::new([(0.0, ya), (1.0, yb)], viridis((a + b) / 2.0).filled())
+    }))
+    .map_err(err)?;
+    bar.draw_series(
+        levels
+            .iter()
+            .map(|&l| PathElement::new(vec![(0.0, l), (1.0, l)], BLACK.mix(0.55).stroke_width(1))),
+    )
+    .map_err(err)?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn levels_are_round_and_cover_the_range() {
+        let l = levels(0.0, 0.73);
+        assert_eq!(l.len(), 9);
+        for (i, v) in l.iter().enumerate() {
+            assert!((v - 0.1 * i as f64).abs() < 1e-12, "{l:?}");
+        }
+        // A map from 0.22 to 0.36 px gets steps of 0.02 from 0.22.
+        let l = levels(0.22, 0.36);
+        assert!(
+            (l[1] - l[0] - 0.02).abs() < 1e-12 && (l[0] - 0.22).abs() < 1e-12,
+            "{l:?}"
+        );
+        assert!(*l.last().unwrap() >= 0.36 && l.len() <= 10);
+        // A flat map starts at zero.
+        assert_eq!(levels(0.3, 0.301)[0], 0.0);
+    }
+
+    #[test]
+    fn contour_of_a_ramp_is_a_straight_line_at_the_level() {
+        // σ = u/100: the 3 px contour is the column u = 300.
+        let mut map = UncertaintyMap {
+            width: 640,
+            height: 480,
+            columns: 16,
+            rows: 12,
+            sigma_px: Vec::new(),
+        };
+        for r in 0..12 {
+            for c in 0..16 {
+                let v = map.centre(c, r).x / 100.0;
+                map.sigma_px.push(v);
+            }
+        }
+        let segments = contour(&map, 3.0);
+        assert_eq!(segments.len(), 11);
+        for s in segments {
+            for p in s {
+                assert!((p.0 - 300.0).abs() < 1e-9, "{p:?}");
+            }
+        }
+    }
+}

@@ -1,0 +1,314 @@
+//! What a camera's intrinsics covariance Σ_θ means in pixels (SPEC §3a): the
+//! standard deviation of each intrinsic, the expected mapping error to the true
+//! intrinsics (plain, and with the virtual rotation of SPEC §3 profiled out) and the
+//! projection-uncertainty map over the image. Pure arithmetic on Σ_θ; computing
+//! Σ_θ from a solve is `solver::uncertainty`'s.
+use crate::model::lens::Intrinsics;
+use crate::model::metrics::grid_rays;
+use nalgebra::{DMatrix, Matrix2, Matrix2x3, Matrix3, Rotation3, Vector2, Vector3};
+
+/// Why a calibration has no uncertainty figures.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum UncertaintyError {
+    /// The data do not determine every free parameter: JᵀJ is singular there.
+    #[error("the data do not determine {0} (the normal equations are singular there)")]
+    RankDeficient(String),
+    /// No detector noise σ̂ to scale the covariance with.
+    #[error("no detector noise estimate: set [calibration] detector_noise_px")]
+    NoNoise,
+    /// The Jacobian at the optimum could not be had or has an unexpected form.
+    #[error("the Jacobian at the optimum is unusable: {0}")]
+    Jacobian(String),
+    /// More parameters remain after eliminating the per-image or per-corner blocks
+    /// than a dense covariance computation should hold.
+    #[error("{0} parameters remain after elimination; at most {MAX_REDUCED} are supported")]
+    TooLarge(usize),
+}
+
+/// Most parameters a dense reduced system may have (about 200 MB of f64).
+pub const MAX_REDUCED: usize = 5000;
+
+/// The covariance of one camera's intrinsics at a detector noise of 1 px per
+/// coordinate: multiply by σ̂² for the covariance at noise σ̂.
+#[derive(Debug, Clone, PartialEq)]
+pub struct IntrinsicsCovariance {
+    /// Per lens parameter (registry order): estimated; `false` for a parameter
+    /// held at its value, whose row and column are zero.
+    pub free: Vec<bool>,
+    /// n × n over the lens parameters, in their units squared per px².
+    pub unit: DMatrix<f64>,
+}
+
+/// A camera's uncertainty figures at a given noise (SPEC §3a, §5).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CameraUncertainty {
+    /// σ of each estimated lens parameter (held ones are left out), registry order.
+    pub intrinsics_std: Vec<(&'static str, f64)>,
+    /// √(trace(H Σ_θ)/M): the mapping error to the truth that the noise alone leaves.
+    pub expected_mapping_error_px: f64,
+    /// The same with the virtual rotation profiled out.
+    pub expected_mapping_error_rot_px: f64,
+}
+
+/// Relative step of the central differences in the lens parameters: the
+/// projections are smooth in them, so the truncation error (∝ h²) is far below
+/// the round-off (∝ ε/h) at this step.
+const PARAM_STEP: f64 = 1e-6;
+/// Step of the central differences in the virtual rotation, radians.
+const ROTATION_STEP: f64 = 1e-6;
+
+/// J = ∂project_θ'(ray)/∂θ' at θ' = θ (2 × n), by central differences; `None` if a
+/// perturbed projection fails (a ray at the edge of the model's domain).
+pub fn projection_jacobian(k: &Intrinsics, ray: &Vector3<f64>) -> Option<DMatrix<f64>> {
+    let n = k.params().len();
+    let mut j = DMatrix::zeros(2, n);
+    for i in 0..n {
+        let h = PARAM_STEP * k.params()[i].abs().max(1.0);
+        let (mut plus, mut minus) = (*k, *k);
+        plus.params_mut()[i] += h;
+        minus.params_mut()[i] -= h;
+        let d = (plus.project(ray)? - minus.project(ray)?) / (2.0 * h);
+        j[(0, i)] = d.x;
+        j[(1, i)] = d.y;
+    }
+    Some(j)
+}
+
+/// K = ∂project_θ(R(ω)·ray)/∂ω at ω = 0 (2 × 3), by central differences.
+fn rotation_jacobian(k: &Intrinsics, ray: &Vector3<f64>) -> Option<Matrix2x3<f64>> {
+    let mut out = Matrix2x3::zeros();
+    for a in 0..3 {
+        let mut w = Vector3::zeros();
+        w[a] = ROTATION_STEP;
+        let plus = k.project(&(Rotation3::from_scaled_axis(w) * ray))?;
+        let minus = k.project(&(Rotation3::from_scaled_axis(-w) * ray))?;
+        out.set_column(a, &((plus - minus) / (2.0 * ROTATION_STEP)));
+    }
+    Some(out)
+}
+
+/// The mapping-error grid's quadratic forms: H = Σ J_gᵀJ_g and, with the virtual
+/// rotation ω profiled out, H − C (KᵀK)⁻¹ Cᵀ (C = Σ J_gᵀK_g, KᵀK = Σ K_gᵀK_g),
+/// each over the M grid points; `None` without a usable grid point.
+pub fn mapping_forms(
+    k: &Intrinsics,
+    width: u32,
+    height: u32,
+) -> Option<(DMatrix<f64>, DMatrix<f64>, usize)> {
+    let n = k.params().len();
+    let (mut h, mut c, mut kk) = (DMatrix::zeros(n, n), DMatrix::zeros(n, 3), Matrix3::zeros());
+    let mut m = 0;
+    for (_, ray) in grid_rays(k, width, height) {
+        let (Some(j), Some(r)) = (projection_jacobian(k, &ray), rotation_jacobian(k, &ray)) else {
+            continue;
+        };
+        let r = DMatrix::from_column_slice(2, 3, r.as_slice());
+        h += j.transpose() * &j;
+        c += j.transpose() * &r;
+        kk += Matrix3::from_column_slice((r.transpose() * &r).as_slice());
+        m += 1;
+    }
+    let kk_inv = kk.try_inverse()?;
+    let kk_inv = DMatrix::from_column_slice(3, 3, kk_inv.as_slice());
+    let h_rot = &h - &c * kk_inv * c.transpose();
+    (m > 0).then_some((h, h_rot, m))
+}
+
+/// The figures of one camera for a covariance Σ_θ already scaled to the noise;
+/// `None` when no grid pixel can be unprojected.
+pub fn camera_uncertainty(
+    k: &Intrinsics,
+    free: &[bool],
+    sigma: &DMatrix<f64>,
+    width: u32,
+    height: u32,
+) -> Option<CameraUncertainty> {
+    let (h, h_rot, m) = mapping_forms(k, width, height)?;
+    // trace(HΣ) is the expected squared mapping error summed over the grid; a
+    // negative round-off of a (nearly) zero figure is clamped.
+    let expected = |form: &DMatrix<f64>| ((form * sigma).trace().max(0.0) / m as f64).sqrt();
+    let intrinsics_std = k
+        .model()
+        .param_names()
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| free[*i])
+        .map(|(i, &name)| (name, sigma[(i, i)].max(0.0).sqrt()))
+        .collect();
+    Some(CameraUncertainty {
+        intrinsics_std,
+        expected_mapping_error_px: expected(&h),
+        expected_mapping_error_rot_px: expected(&h_rot),
+    })
+}
+
+/// The predicted 1-σ projection error over an image, on a grid of cells.
+#[derive(Debug, Clone, PartialEq)]
+pub struct UncertaintyMap {
+    pub width: u32,
+    pub height: u32,
+    /// Cells across and down.
+    pub columns: usize,
+    pub rows: usize,
+    /// Per cell, row-major from the top left: √λ_max(J_g Σ_θ J_gᵀ) at the cell's
+    /// centre in pixels; NaN where the pixel has no ray.
+    pub sigma_px: Vec<f64>,
+}
+
+impl UncertaintyMap {
+    /// The centre pixel of cell (column, row); pixel centres are integers (SPEC §1).
+    pub fn centre(&self, column: usize, row: usize) -> Vector2<f64> {
+        let (w, h) = (self.width as f64, self.height as f64);
+        Vector2::new(
+            (column as f64 + 0.5) * w / self.columns as f64 - 0.5,
+            (row as f64 + 0.5) * h / self.rows as f64 - 0.5,
+        )
+    }
+
+    /// The smallest finite σ of the map (0 if none).
+    pub fn min(&self) -> f64 {
+        let min = self
+            .sigma_px
+            .iter()
+            .copied()
+            .filter(|v| v.is_finite())
+            .fold(f64::INFINITY, f64::min);
+        if min.is_finite() {
+            min
+        } else {
+            0.0
+        }
+    }
+
+    /// The largest finite σ of the map (0 if none).
+    pub fn max(&self) -> f64 {
+        self.sigma_px
+            .iter()
+            .copied()
+            .filter(|v| v.is_finite())
+            .fold(0.0, f64::max)
+    }
+}
+
+/// The projection-uncertainty map of intrinsics `k` with noise-scaled covariance
+/// `sigma`, on about `columns` cells across (square cells).
+///
+/// Each cell shows the standard deviation along the worst direction of where a
+/// fixed ray (the one the estimate maps to the cell's centre) lands in the image:
+/// the square root of the largest eigenvalue of J_g Σ_θ J_gᵀ, J_g as in the
+/// expected mapping error (whose square is the mean over the grid of the trace,
+/// the sum of both eigenvalues).
+pub fn projection_uncertainty_map(
+    k: &Intrinsics,
+    sigma: &DMatrix<f64>,
+    width: u32,
+    height: u32,
+    columns: usize,
+) -> UncertaintyMap {
+    let columns = columns.max(1);
+    let rows = ((columns as f64 * height as f64 / width.max(1) as f64).round() as usize).max(1);
+    let mut map = UncertaintyMap {
+        width,
+        height,
+        columns,
+        rows,
+        sigma_px: Vec::with_capacity(columns * rows),
+    };
+    for r in 0..rows {
+        for c in 0..columns {
+            let px = map.centre(c, r);
+            let value = k
+                .unproject(&px)
+                .and_then(|ray| projection_jacobian(k, &ray))
+                .map(|j| {
+                    let s = &j * sigma * j.transpose();
+                    let s = Matrix2::new(s[(0, 0)], s[(0, 1)], s[(1, 0)], s[(1, 1)]);
+                    s.symmetric_eigenvalues().max().max(0.0).sqrt()
+                })
+                .unwrap_or(f64::NAN);
+            map.sigma_px.push(value);
+        }
+    }
+    map
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::metrics::{mapping_error, mapping_error_rot};
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, StandardNormal};
+
+    fn lens() -> Intrinsics {
+        Intrinsics::radial3([1000.0, 1002.0, 320.0, 240.0, -0.2, 0.1, -0.02])
+    }
+
+    /// A covariance with strong correlations, as a calibration's has.
+    fn covariance() -> DMatrix<f64> {
+        let a = DMatrix::from_fn(7, 7, |i, j| ((i * 7 + j) as f64 * 0.37).sin());
+        let scale = DMatrix::from_diagonal(&nalgebra::DVector::from_vec(vec![
+            0.8, 0.8, 0.5, 0.5, 1e-3, 2e-3, 2e-3,
+        ]));
+        let correlated = &a * a.transpose() / 7.0 + DMatrix::identity(7, 7) * 0.05;
+        &scale * correlated * &scale
+    }
+
+    #[test]
+    fn expected_mapping_error_matches_sampled_intrinsics() {
+        // Draw intrinsics from N(θ, Σ) and measure their mapping error to θ: the
+        // RMS over the draws is what the formula predicts, plain and rotated.
+        let (k, sigma) = (lens(), covariance());
+        let u = sigma.clone().cholesky().unwrap().l();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let (mut plain, mut rot, n) = (0.0, 0.0, 400);
+        for _ in 0..n {
+            let z = nalgebra::DVector::from_fn(7, |_, _| StandardNormal.sample(&mut rng));
+            let d = &u * z;
+            let mut b = k;
+            for (i, p) in b.params_mut().iter_mut().enumerate() {
+                *p += d[i];
+            }
+            plain += mapping_error(&k, &b, 640, 480).powi(2);
+            rot += mapping_error_rot(&k, &b, 640, 480).powi(2);
+        }
+        let (plain, rot) = ((plain / n as f64).sqrt(), (rot / n as f64).sqrt());
+        let e = camera_uncertainty(&k, &[true; 7], &sigma, 640, 480).unwrap();
+        assert!(plain > 0.1 && rot < 0.8 * plain, "{plain} {rot}");
+        for (predicted, sampled) in [
+            (e.expected_mapping_error_px, plain),
+            (e.expected_mapping_error_rot_px, rot),
+        ] {
+            // 400 draws: the sampled RMS is within a few percent of its expectation.
+            assert!(
+                (predicted / sampled - 1.0).abs() < 0.08,
+                "{predicted} vs {sampled}"
+            );
+        }
+        assert_eq!(e.intrinsics_std[0].0, "fx");
+        assert!((e.intrinsics_std[4].1 - sigma[(4, 4)].sqrt()).abs() < 1e-15);
+    }
+
+    #[test]
+    fn map_of_a_focal_length_error_grows_from_the_centre() {
+        // Only fx uncertain (σ 1 px) without distortion: a ray at u lands off by
+        // σ·(u − cx)/fx, zero on the column through cx.
+        let k = Intrinsics::pinhole(1000.0, 1000.0, 320.0, 240.0);
+        let mut sigma = DMatrix::zeros(7, 7);
+        sigma[(0, 0)] = 1.0;
+        let map = projection_uncertainty_map(&k, &sigma, 640, 480, 16);
+        assert_eq!((map.columns, map.rows), (16, 12));
+        for r in 0..map.rows {
+            for c in 0..map.columns {
+                let expected = (map.centre(c, r).x - 320.0).abs() / 1000.0;
+                let got = map.sigma_px[r * map.columns + c];
+                assert!((got - expected).abs() < 1e-6, "{got} vs {expected}");
+            }
+        }
+        // The expected mapping error is then that of a 1 px change of fx.
+        let e = camera_uncertainty(&k, &[true; 7], &sigma, 640, 480).unwrap();
+        let one_px = mapping_error(&k, &k.with_param("fx", 1001.0), 640, 480);
+        assert!((e.expected_mapping_error_px / one_px - 1.0).abs() < 1e-6);
+        // fx's change is no rotation: profiling one out barely helps.
+        assert!(e.expected_mapping_error_rot_px > 0.5 * one_px);
+    }
+}

@@ -1,0 +1,505 @@
+//! The covariance of a solved problem's intrinsics (SPEC §3a) from the Jacobian
+//! at its optimum, at unit noise; `solver::uncertainty` scales it to a
+//! calibration's noise and `model::uncertainty` turns it into pixels.
+//!
+//! The gauge is fixed by the parameterisation: held corners have no Jacobian
+//! column, so JᵀJ is regular for a well-posed problem and is inverted as it is,
+//! never pseudo-inverted. The per-image blocks (pose, bend) or the per-corner
+//! corrections, whichever leaves fewer parameters, are eliminated by a Schur
+//! complement, as Ceres' solver does; the reduced system is dense.
+//!
+//! The robust loss enters as fixed weights: with w = ρ'(‖r‖²) per observation the
+//! fit solves the weighted normal equations H = JᵀWJ, so an estimate moves by
+//! H⁻¹JᵀW·noise and Σ_θ = σ̂² [H⁻¹ (JᵀW²J) H⁻¹]_θθ; without a loss (W = I) this is
+//! σ̂² [(JᵀJ)⁻¹]_θθ, and a uniform weight cancels.
+use crate::model::dataset::Dataset;
+use crate::model::state::{Layout, CORRECTION_STRIDE, POSE_PARAMS};
+use crate::model::uncertainty::{IntrinsicsCovariance, UncertaintyError, MAX_REDUCED};
+use crate::solver::problem::{Evaluation, Loss, Problem, SolverSettings, State};
+use nalgebra::DMatrix;
+use std::collections::HashMap;
+
+/// A diagonal pivot of the Jacobi-scaled normal matrix below this marks a
+/// direction the data do not determine: its parameter is then a combination of
+/// the others to a relative 1e-5 (round-off leaves about 1e-16 in a true null
+/// direction; a weak but real one, such as k3 against k1 and k2, stays far above).
+const MIN_PIVOT: f64 = 1e-10;
+
+/// Most values the coupling block Bᵀ (eliminated × kept) may hold: 400 MB of f64.
+const MAX_COUPLING: usize = 50_000_000;
+
+/// Where a Jacobian column goes: the dense reduced system, or a block eliminated
+/// first (`index` counts the eliminated values, block by block).
+#[derive(Debug, Clone, Copy)]
+enum Role {
+    Kept(usize),
+    Eliminated { group: usize, index: usize },
+}
+
+/// The normal matrix JᵀWJ in block-arrow form, and what its columns are.
+struct Normal {
+    roles: Vec<Role>,
+    /// Per column: the value it differentiates (its index in the parameter buffer).
+    params: Vec<usize>,
+    /// Per kept index: its column.
+    kept_columns: Vec<usize>,
+    /// The kept block A (kept × kept).
+    a: DMatrix<f64>,
+    /// Per eliminated block: its first eliminated index and its size.
+    groups: Vec<(usize, usize)>,
+    /// Per eliminated block: its diagonal block D, size × size row-major.
+    d: Vec<Vec<f64>>,
+    /// Bᵀ (eliminated × kept), so that a kept value's couplings are contiguous.
+    bt: DMatrix<f64>,
+}
+
+/// The group of a buffer index when per-image blocks (`frames`) or per-corner
+/// corrections are eliminated; `None` for a kept value.
+fn group_of(layout: &Layout, index: usize, frames: bool) -> Option<usize> {
+    if frames && (layout.frames..layout.corrections).contains(&index) {
+        Some((index - layout.frames) / layout.frame_stride)
+    } else if !frames && index >= layout.corrections {
+        Some((index - layout.corrections) / CORRECTION_STRIDE)
+    } else {
+        None
+    }
+}
+
+/// The roles of the columns and the eliminated blocks (first index, size):
+/// eliminate whichever of the per-image and per-corner blocks leaves the smaller
+/// reduced system.
+fn roles(layout: &Layout, params: &[usize]) -> (Vec<Role>, usize, Vec<(usize, usize)>) {
+    let count = |frames| {
+        params
+            .iter()
+            .filter(|&&p| group_of(layout, p, frames).is_some())
+            .count()
+    };
+    let (in_frames, in_corners) = (count(true), count(false));
+    let frames = in_corners == 0 || in_frames >= in_corners;
+    let mut ids: HashMap<usize, usize> = HashMap::new();
+    let mut sizes: Vec<usize> = Vec::new();
+    let mut local = Vec::with_capacity(params.len());
+    let mut kept = 0;
+    for &p in params {
+        local.push(match group_of(layout, p, frames) {
+            None => {
+                kept += 1;
+                None
+            }
+            Some(g) => {
+                let next = sizes.len();
+                let group = *ids.entry(g).or_insert(next);
+                if group == next {
+                    sizes.push(0);
+                }
+                sizes[group] += 1;
+                Some((group, sizes[group] - 1))
+            }
+        });
+    }
+    let mut groups = Vec::with_capacity(sizes.len());
+    let mut start = 0;
+    for &m in &sizes {
+        groups.push((start, m));
+        start += m;
+    }
+    let mut k = 0;
+    let roles = local
+        .into_iter()
+        .map(|l| match l {
+            None => {
+                k += 1;
+                Role::Kept(k - 1)
+            }
+            Some((group, i)) => Role::Eliminated {
+                group,
+                index: groups[group].0 + i,
+            },
+        })
+        .collect();
+    (roles, kept, groups)
+}
+
+/// JᵀWJ from a CRS Jacobian with one weight per pair of rows (per observation).
+fn normal_matrix(
+    e: &Evaluation,
+    layout: &Layout,
+    weights: &[f64],
+) -> Result<Normal, UncertaintyError> {
+    let params: Vec<usize> = e.jacobian_col_param.iter().map(|&p| p as usize).collect();
+    let (roles, kept, groups) = roles(layout, &params);
+    let eliminated: usize = groups.iter().map(|g| g.1).sum();
+    if kept > MAX_REDUCED || kept.saturating_mul(eliminated) > MAX_COUPLING {
+        return Err(UncertaintyError::TooLarge(kept));
+    }
+    let mut n = Normal {
+        kept_columns: (0..params.len())
+            .filter(|&c| matches!(roles[c], Role::Kept(_)))
+            .collect(),
+        roles,
+        params,
+        a: DMatrix::zeros(kept, kept),
+        d: groups.iter().map(|&(_, m)| vec![0.0; m * m]).collect(),
+        groups,
+        bt: DMatrix::zeros(eliminated, kept),
+    };
+    let (mut k_entries, mut e_entries) = (Vec::new(), Vec::new());
+    for r in 0..e.jacobian_rows {
+        k_entries.clear();
+        e_entries.clear();
+        let (lo, hi) = (
+            e.jacobian_row_ptr[r] as usize,
+            e.jacobian_row_ptr[r + 1] as usize,
+        );
+        for i in lo..hi {
+            let v = e.jacobian_values[i];
+            match n.roles[e.jacobian_col_idx[i] as usize] {
+                Role::Kept(k) => k_entries.push((k, v)),
+                Role::Eliminated { group, index } => e_entries.push((group, index, v)),
+            }
+        }
+        accumulate(&mut n, weights[r / 2], &k_entries, &e_entries)?;
+    }
+    Ok(n)
+}
+
+/// Adds one weighted Jacobian row's outer product to the block-arrow normal matrix.
+fn accumulate(
+    n: &mut Normal,
+    w: f64,
+    kept: &[(usize, f64)],
+    eliminated: &[(usize, usize, f64)],
+) -> Result<(), UncertaintyError> {
+    let kk = n.a.nrows();
+    let a = n.a.as_mut_slice();
+    for &(j, vj) in kept {
+        for &(i, vi) in kept {
+            a[j * kk + i] += w * vi * vj;
+        }
+    }
+    let Some(&(g, _, _)) = eliminated.first() else {
+        return Ok(());
+    };
+    if eliminated.iter().any(|&(h, _, _)| h != g) {
+        return Err(UncertaintyError::Jacobian(
+            "a residual depends on two eliminated blocks".into(),
+        ));
+    }
+    let (start, m) = n.groups[g];
+    let d = &mut n.d[g];
+    for &(_, a, va) in eliminated {
+        for &(_, b, vb) in eliminated {
+            d[(a - start) * m + b - start] += w * va * vb;
+        }
+    }
+    let ne = n.bt.nrows();
+    let bt = n.bt.as_mut_slice();
+    for &(k, vk) in kept {
+        for &(_, a, va) in eliminated {
+            bt[k * ne + a] += w * vk * va;
+        }
+    }
+    Ok(())
+}
+
+/// In-place lower Cholesky factor of a symmetric m × m row-major matrix; `Err(i)`
+/// at the first pivot below [`MIN_PIVOT`] (the matrix is Jacobi-scaled, unit diagonal).
+fn cholesky(a: &mut [f64], m: usize) -> Result<(), usize> {
+    for j in 0..m {
+        let (done, rest) = a.split_at_mut(j * m + m);
+        let row_j = &mut done[j * m..];
+        let d = row_j[j] - dot(&row_j[..j], &row_j[..j]);
+        // NaN fails too.
+        if d.is_nan() || d <= MIN_PIVOT {
+            return Err(j);
+        }
+        let d = d.sqrt();
+        row_j[j] = d;
+        row_j[j + 1..].iter_mut().for_each(|v| *v = 0.0);
+        for row_i in rest.chunks_exact_mut(m) {
+            row_i[j] = (row_i[j] - dot(&row_i[..j], &row_j[..j])) / d;
+        }
+    }
+    Ok(())
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// Solves L y = b in place (L lower, row-major m × m).
+fn forward(l: &[f64], m: usize, b: &mut [f64]) {
+    for i in 0..m {
+        let s = b[i] - dot(&l[i * m..i * m + i], &b[..i]);
+        b[i] = s / l[i * m + i];
+    }
+}
+
+/// Solves Lᵀ x = y in place.
+fn backward(l: &[f64], m: usize, y: &mut [f64]) {
+    for i in (0..m).rev() {
+        let mut s = y[i];
+        for k in i + 1..m {
+            s -= l[k * m + i] * y[k];
+        }
+        y[i] = s / l[i * m + i];
+    }
+}
+
+/// What a buffer index is, in words, for a message.
+fn describe(d: &Dataset, layout: &Layout, index: usize) -> String {
+    if index < layout.intrinsics_len() {
+        let k = layout
+            .intrinsics_offsets
+            .iter()
+            .rposition(|&o| o <= index)
+            .unwrap_or(0);
+        let name = layout.lens_models[k].param_names()[index - layout.intrinsics_offsets[k]];
+        format!("{name} of camera {}", d.cameras[k].name)
+    } else if index < layout.frames {
+        let k = (index - layout.camera_poses) / POSE_PARAMS;
+        format!("the pose of camera {}", d.cameras[k].name)
+    } else if index < layout.corrections {
+        let j = (index - layout.frames) / layout.frame_stride;
+        let what = if (index - layout.frames) % layout.frame_stride < POSE_PARAMS {
+            "board pose"
+        } else {
+            "bend"
+        };
+        format!("the {what} of frame {}", d.frame_ids[j])
+    } else {
+        let i = (index - layout.corrections) / CORRECTION_STRIDE;
+        format!("the correction of corner {i}")
+    }
+}
+
+/// Scales the normal matrix to a unit diagonal (its pivots then compare with
+/// [`MIN_PIVOT`] whatever the parameters' units); returns the column scales.
+fn jacobi_scale(
+    d: &Dataset,
+    layout: &Layout,
+    n: &mut Normal,
+) -> Result<Vec<f64>, UncertaintyError> {
+    let kk = n.a.nrows();
+    let mut kept = vec![0.0; kk];
+    let mut eliminated = vec![0.0; n.bt.nrows()];
+    for (col, role) in n.roles.iter().enumerate() {
+        let (diag, slot) = match *role {
+            Role::Kept(k) => (n.a[(k, k)], &mut kept[k]),
+            Role::Eliminated { group, index } => {
+                let (start, m) = n.groups[group];
+                let i = index - start;
+                (n.d[group][i * m + i], &mut eliminated[index])
+            }
+        };
+        if !(diag > 0.0 && diag.is_finite()) {
+            return Err(UncertaintyError::RankDeficient(describe(
+                d,
+                layout,
+                n.params[col],
+            )));
+        }
+        *slot = 1.0 / diag.sqrt();
+    }
+    for (j, mut column) in n.a.column_iter_mut().enumerate() {
+        for (i, v) in column.iter_mut().enumerate() {
+            *v *= kept[i] * kept[j];
+        }
+    }
+    for (&(start, m), d) in n.groups.iter().zip(&mut n.d) {
+        for a in 0..m {
+            for b in 0..m {
+                d[a * m + b] *= eliminated[start + a] * eliminated[start + b];
+            }
+        }
+    }
+    for (k, mut column) in n.bt.column_iter_mut().enumerate() {
+        for (e, v) in column.iter_mut().enumerate() {
+            *v *= kept[k] * eliminated[e];
+        }
+    }
+    Ok(n.roles
+        .iter()
+        .map(|r| match *r {
+            Role::Kept(k) => kept[k],
+            Role::Eliminated { index, .. } => eliminated[index],
+        })
+        .collect())
+}
+
+/// Eliminates every block: factors D = LLᵀ in place, turns Bᵀ into L⁻¹Bᵀ and
+/// subtracts its Gram matrix from the kept block, leaving the Schur complement
+/// A − B D⁻¹ Bᵀ there (one matrix product); then factors that too.
+fn eliminate(d: &Dataset, layout: &Layout, n: &mut Normal) -> Result<(), UncertaintyError> {
+    let ne = n.bt.nrows();
+    for (g, &(start, m)) in n.groups.iter().enumerate() {
+        cholesky(&mut n.d[g], m).map_err(|l| {
+            let col = n
+                .roles
+                .iter()
+                .position(|r| matches!(*r, Role::Eliminated { index, .. } if index == start + l))
+                .unwrap_or(0);
+            UncertaintyError::RankDeficient(describe(d, layout, n.params[col]))
+        })?;
+        for column in n.bt.as_mut_slice().chunks_exact_mut(ne) {
+            forward(&n.d[g], m, &mut column[start..start + m]);
+        }
+    }
+    n.a.gemm(-1.0, &n.bt.transpose(), &n.bt, 1.0);
+    let kk = n.a.nrows();
+    // Symmetric, so the column-major storage reads as row-major.
+    cholesky(n.a.as_mut_slice(), kk).map_err(|k| {
+        UncertaintyError::RankDeficient(describe(d, layout, n.params[n.kept_columns[k]]))
+    })
+}
+
+/// X = H⁻¹ E for the unit vectors E of the `targets` columns (all kept): one
+/// row of `targets.len()` values per column of the Jacobian, in its units.
+fn solve_columns(n: &Normal, scale: &[f64], targets: &[usize]) -> Vec<f64> {
+    let (kk, t) = (n.a.nrows(), targets.len());
+    // The factor L is stored row-major in `a`; backward substitution reads it by
+    // columns, which Lᵀ stored row-major (a's transpose) holds by rows.
+    let l = n.a.as_slice();
+    let lt = n.a.transpose();
+    let lt = lt.as_slice();
+    let mut kept_x = DMatrix::zeros(kk, t);
+    for (u, &col) in targets.iter().enumerate() {
+        let Role::Kept(k) = n.roles[col] else {
+            unreachable!("intrinsics are never eliminated")
+        };
+        let rhs = kept_x.column_mut(u);
+        let rhs = rhs.data.into_slice_mut();
+        rhs[k] = scale[col];
+        forward(l, kk, rhs);
+        for i in (0..kk).rev() {
+            let row = &lt[i * kk..(i + 1) * kk];
+            rhs[i] = (rhs[i] - dot(&row[i + 1..], &rhs[i + 1..])) / row[i];
+        }
+    }
+    // x_g = −L⁻ᵀ (L⁻¹Bᵀ) x_kept for every eliminated block at once.
+    let mut eliminated_x = -(&n.bt * &kept_x);
+    let ne = n.bt.nrows();
+    for (g, &(start, m)) in n.groups.iter().enumerate() {
+        for column in eliminated_x.as_mut_slice().chunks_exact_mut(ne) {
+            backward(&n.d[g], m, &mut column[start..start + m]);
+        }
+    }
+    let mut x = vec![0.0; n.roles.len() * t];
+    for (col, role) in n.roles.iter().enumerate() {
+        let row = match *role {
+            Role::Kept(k) => kept_x.row(k),
+            Role::Eliminated { index, .. } => eliminated_x.row(index),
+        };
+        for (u, v) in row.iter().enumerate() {
+            x[col * t + u] = scale[col] * v;
+        }
+    }
+    x
+}
+
+/// The robust loss' weight ρ'(‖r‖²) of each observation (1 without a loss).
+fn loss_weights(d: &Dataset, settings: &SolverSettings, residuals: &[f64]) -> Vec<f64> {
+    let a2 = settings.loss_scale_px * settings.loss_scale_px;
+    d.observations
+        .iter()
+        .zip(residuals.chunks_exact(2))
+        .map(|(o, r)| match settings.loss {
+            Loss::None => 1.0,
+            Loss::Cauchy => {
+                let s = (r[0] * r[0] + r[1] * r[1]) * o.weight * o.weight;
+                1.0 / (1.0 + s / a2)
+            }
+        })
+        .collect()
+}
+
+/// Σ_θ of every camera at unit noise, from the Jacobian of `problem` at `state`
+/// (its optimum) with the loss of `settings`.
+pub fn unit_covariance(
+    problem: &Problem,
+    state: &State,
+    settings: &SolverSettings,
+) -> Result<Vec<IntrinsicsCovariance>, UncertaintyError> {
+    let d = problem.dataset;
+    let layout = problem.layout();
+    let e = problem
+        .jacobian(state, settings)
+        .map_err(|e| UncertaintyError::Jacobian(e.to_string()))?;
+    let rows = 2 * d.observations.len();
+    if e.jacobian_rows != rows
+        || e.jacobian_row_ptr.len() != rows + 1
+        || e.jacobian_col_param.len() != e.jacobian_cols
+    {
+        return Err(UncertaintyError::Jacobian(format!(
+            "{} × {} with {} column labels for {rows} residuals",
+            e.jacobian_rows,
+            e.jacobian_cols,
+            e.jacobian_col_param.len()
+        )));
+    }
+    let weights = loss_weights(d, settings, &e.residuals);
+    let mut n = normal_matrix(&e, &layout, &weights)?;
+    let scale = jacobi_scale(d, &layout, &mut n)?;
+    eliminate(d, &layout, &mut n)?;
+    let targets: Vec<usize> = (0..n.params.len())
+        .filter(|&col| n.params[col] < layout.intrinsics_len())
+        .collect();
+    let x = solve_columns(&n, &scale, &targets);
+    let sigma = sandwich(&e, &weights, &x, targets.len());
+    Ok(per_camera(&layout, &n.params, &targets, &sigma))
+}
+
+/// (WJX)ᵀ(WJX), t × t, with X given per Jacobian column (t values each).
+fn sandwich(e: &Evaluation, weights: &[f64], x: &[f64], t: usize) -> DMatrix<f64> {
+    let mut out = DMatrix::zeros(t, t);
+    let mut y = vec![0.0; t];
+    for r in 0..e.jacobian_rows {
+        y.iter_mut().for_each(|v| *v = 0.0);
+        for i in e.jacobian_row_ptr[r] as usize..e.jacobian_row_ptr[r + 1] as usize {
+            let (col, v) = (e.jacobian_col_idx[i] as usize, e.jacobian_values[i]);
+            for u in 0..t {
+                y[u] += v * x[col * t + u];
+            }
+        }
+        let w = weights[r / 2];
+        for a in 0..t {
+            for b in 0..t {
+                out[(a, b)] += w * w * y[a] * y[b];
+            }
+        }
+    }
+    out
+}
+
+/// Splits Σ over all free intrinsics into each camera's n × n block.
+fn per_camera(
+    layout: &Layout,
+    params: &[usize],
+    targets: &[usize],
+    sigma: &DMatrix<f64>,
+) -> Vec<IntrinsicsCovariance> {
+    layout
+        .lens_models
+        .iter()
+        .zip(&layout.intrinsics_offsets)
+        .map(|(model, &offset)| {
+            let np = model.num_params();
+            let mut cov = IntrinsicsCovariance {
+                free: vec![false; np],
+                unit: DMatrix::zeros(np, np),
+            };
+            let local = |u: usize| params[targets[u]].checked_sub(offset).filter(|&i| i < np);
+            for a in 0..targets.len() {
+                let Some(i) = local(a) else { continue };
+                cov.free[i] = true;
+                for b in 0..targets.len() {
+                    if let Some(j) = local(b) {
+                        cov.unit[(i, j)] = sigma[(a, b)];
+                    }
+                }
+            }
+            cov
+        })
+        .collect()
+}

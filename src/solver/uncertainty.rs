@@ -1,0 +1,46 @@
+//! The uncertainty of a finished calibration (SPEC §3a): its intrinsics'
+//! covariance, computed after every solve (`solver::covariance`) at unit noise,
+//! scaled to the noise σ̂ its trust figures use, and the figures in pixels that
+//! `model::uncertainty` derives from it.
+use crate::model::uncertainty::{
+    camera_uncertainty, CameraUncertainty, IntrinsicsCovariance, UncertaintyError,
+};
+use crate::solver::calibrate::Calibration;
+use nalgebra::DMatrix;
+
+/// Σ_θ of every camera of `c` at unit noise, from the Jacobian at its optimum
+/// (what [`Calibration::covariance`] holds).
+pub fn unit_covariance(c: &Calibration) -> Result<Vec<IntrinsicsCovariance>, UncertaintyError> {
+    crate::solver::covariance::unit_covariance(&c.problem(), &c.state, &c.settings)
+}
+
+impl Calibration {
+    /// Σ_θ of every camera at the calibration's noise σ̂ (the one
+    /// [`Calibration::trust`] uses); rows and columns of held parameters are zero.
+    pub fn intrinsics_covariance(&self) -> Result<Vec<DMatrix<f64>>, UncertaintyError> {
+        let noise = self
+            .trust(self.detector_noise_px)
+            .ok_or(UncertaintyError::NoNoise)?
+            .noise_px;
+        let unit = self.covariance.as_ref().map_err(Clone::clone)?;
+        Ok(unit.iter().map(|c| &c.unit * (noise * noise)).collect())
+    }
+
+    /// Every camera's uncertainty figures (SPEC §3a) at the noise σ̂.
+    pub fn uncertainty(&self) -> Result<Vec<CameraUncertainty>, UncertaintyError> {
+        let sigma = self.intrinsics_covariance()?;
+        let unit = self.covariance.as_ref().map_err(Clone::clone)?;
+        let cameras = self.dataset.cameras.iter().zip(&self.state.intrinsics);
+        cameras
+            .zip(unit.iter().zip(&sigma))
+            .map(|((cam, k), (cov, sigma))| {
+                camera_uncertainty(k, &cov.free, sigma, cam.width, cam.height).ok_or_else(|| {
+                    UncertaintyError::Jacobian(format!(
+                        "no pixel of camera {} has a ray to measure the mapping error on",
+                        cam.name
+                    ))
+                })
+            })
+            .collect()
+    }
+}
