@@ -37,9 +37,10 @@ fn independent_calibrations_differ_by_their_noise_and_a_bias_by_more() {
         .collect();
     let mean = ratios.iter().sum::<f64>() / ratios.len() as f64;
     assert!((0.5..=REAL_DIFFERENCE_FACTOR).contains(&mean), "{ratios:?}");
-    // On bending boards `standard` is biased: far more than noise from `dynamic`.
-    let a = json(Preset::T1, 30, 1.0, Method::Standard);
-    let b = json(Preset::T1, 30, 1.0, Method::Dynamic);
+    // On T3's strongly bending boards `standard` is biased: far more than noise
+    // from `dynamic` (on the same data, so their own noise mostly cancels).
+    let a = json(Preset::T3, 30, 1.0, Method::Standard);
+    let b = json(Preset::T3, 30, 1.0, Method::Dynamic);
     let d = &compare(&a, &b).unwrap()[0];
     eprintln!(
         "standard vs dynamic: {:.4} px rot., {}",
@@ -57,8 +58,8 @@ fn independent_calibrations_differ_by_their_noise_and_a_bias_by_more() {
 #[test]
 fn compare_on_the_command_line() {
     let dir = tempfile::tempdir().unwrap();
-    let a = json(Preset::T1, 31, 1.0, Method::Standard);
-    let b = json(Preset::T1, 31, 1.0, Method::Dynamic);
+    let a = json(Preset::T3, 31, 1.0, Method::Standard);
+    let b = json(Preset::T3, 31, 1.0, Method::Dynamic);
     let (pa, pb) = (dir.path().join("a.json"), dir.path().join("b.json"));
     std::fs::write(&pa, serde_json::to_string(&a).unwrap()).unwrap();
     std::fs::write(&pb, serde_json::to_string(&b).unwrap()).unwrap();

@@ -23,12 +23,15 @@ pub struct CameraDiff {
 }
 
 impl CameraDiff {
-    /// The rotation-compensated difference over the one two independent
-    /// calibrations with these uncertainties would show: √(e_a² + e_b²).
+    /// The difference over the one two independent calibrations with these
+    /// uncertainties would show, √(e_a² + e_b²): the larger of the plain and the
+    /// rotation-compensated ratio (a bias may hide from either).
     pub fn ratio(&self) -> Option<f64> {
         let (a, b) = (self.expected_a?, self.expected_b?);
-        let predicted = (a.1 * a.1 + b.1 * b.1).sqrt();
-        (predicted > 0.0).then(|| self.mapping_error_rot_px / predicted)
+        let plain = (a.0 * a.0 + b.0 * b.0).sqrt();
+        let rot = (a.1 * a.1 + b.1 * b.1).sqrt();
+        (plain > 0.0 && rot > 0.0)
+            .then(|| (self.mapping_error_px / plain).max(self.mapping_error_rot_px / rot))
     }
 
     /// Real difference or noise, in words.
