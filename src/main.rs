@@ -3,6 +3,7 @@ use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand};
 use deformcal::app::config::Config;
 use deformcal::app::fsio::{self, OutputSet};
+use deformcal::app::html_report::REPORT_FILE;
 use deformcal::app::protocol::{self, Shard};
 use deformcal::app::{output, report};
 use deformcal::model::synthetic::{Generator, Preset, MAX_IMAGES};
@@ -177,7 +178,8 @@ fn run_calibrate(args: CalibrateArgs) -> Result<()> {
     // Lock and stage the output before the work: a busy or unwritable output
     // directory fails now, not after a long solve.
     let set = OutputSet::begin(&config.output_dir, fsio::calibration_files())?;
-    let (dataset, _truth) = deformcal::app::source::load_data(&config)?;
+    let loaded = deformcal::app::source::load_labelled(&config)?;
+    let dataset = loaded.dataset;
     let request = Request {
         method: config.calibration.method,
         settings: SolverSettings::from(&config.calibration),
@@ -185,7 +187,7 @@ fn run_calibrate(args: CalibrateArgs) -> Result<()> {
     };
     let mut result = calibrate(&dataset, &request)?;
     result.detector_noise_px = config.calibration.detector_noise_px;
-    let written = output::write_calibration(set.path(), &result)?;
+    let written = output::write_calibration_labelled(set.path(), &result, &loaded.labels)?;
     set.commit()?;
     print!("{}", report::summary(&result));
     for w in &written.warnings {
@@ -194,6 +196,10 @@ fn run_calibrate(args: CalibrateArgs) -> Result<()> {
     println!(
         "  wrote {}",
         config.output_dir.join("calibration.json").display()
+    );
+    println!(
+        "  report: {}",
+        config.output_dir.join(REPORT_FILE).display()
     );
     Ok(())
 }
@@ -488,9 +494,10 @@ fn run_batch(args: BatchArgs) -> Result<()> {
     let owned = names.clone();
     let set = OutputSet::begin(
         &args.output,
-        Box::new(move |n| n == "report.md" || owned.contains(n)),
+        Box::new(move |n| n == "report.md" || n == REPORT_FILE || owned.contains(n)),
     )?;
     let mut failed = Vec::new();
+    let mut html = Vec::new();
     for (config, name) in &configs {
         let (header, rows) = protocol_rows(config, args.subsets, None, args.threads)?;
         let dir = set.path().join(name);
@@ -504,8 +511,16 @@ fn run_batch(args: BatchArgs) -> Result<()> {
             &rows,
             &format!("{name}/"),
         ));
+        html.push(deformcal::app::protocol_report::dataset_report(
+            &summary, &rows,
+        )?);
     }
     deformcal::app::fsio::write_atomic(&set.path().join("report.md"), report.as_bytes())?;
+    let page = deformcal::app::html_report::protocol::protocol_page(
+        "deformcal evaluation protocol: combined report",
+        &html,
+    );
+    deformcal::app::fsio::write_atomic(&set.path().join(REPORT_FILE), page.as_bytes())?;
     set.commit()?;
     anyhow::ensure!(failed.is_empty(), "{}", failed.join("; "));
     println!(

@@ -83,6 +83,7 @@ pub fn calibration_files() -> Owns {
             "calibration.json"
                 | "opencv.yaml"
                 | "outliers.csv"
+                | crate::app::html_report::REPORT_FILE
                 | crate::app::exports::KALIBR_FILE
                 | crate::app::exports::COLMAP_FILE
         ) || name.ends_with(".cameramodel")
@@ -96,7 +97,8 @@ pub fn protocol_files() -> Owns {
         matches!(
             name,
             "protocol.csv" | "deformations.csv" | "summary.json" | "report.md"
-        ) || name.ends_with(".svg")
+        ) || name == crate::app::html_report::REPORT_FILE
+            || name.ends_with(".svg")
     })
 }
 

@@ -7,6 +7,7 @@ pub mod corners_vnl;
 pub mod detect;
 pub mod exports;
 pub mod fsio;
+pub mod html_report;
 pub mod observations_csv;
 pub mod output;
 pub mod photos;

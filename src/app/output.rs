@@ -1,18 +1,31 @@
-//! The result files of one calibration: `calibration.json`, its exports and
-//! `outliers.csv`, written into a directory (the staging directory of an
+//! The result files of one calibration: `calibration.json`, its exports,
+//! `outliers.csv` and `report.html`, written into a directory (the staging directory of an
 //! [`crate::app::fsio::OutputSet`], which swaps them in as one set).
 use crate::app::calibration_json::CalibrationJson;
 use crate::app::exports;
 use crate::app::fsio::write_atomic;
+use crate::app::html_report;
+use crate::app::source::FrameLabels;
 use crate::error::{Error, Result};
 use crate::solver::calibrate::Calibration;
 use std::path::{Path, PathBuf};
 
-/// Writes `calibration.json`, its exports (see [`write_models`]) and
-/// `outliers.csv` into `dir` (created if needed); returns the JSON's path.
+/// Writes `calibration.json`, its exports (see [`write_models`]), `outliers.csv`
+/// and `report.html` into `dir` (created if needed); returns the JSON's path.
 pub fn write_calibration(dir: &Path, c: &Calibration) -> Result<Written> {
+    write_calibration_labelled(dir, c, &FrameLabels::new())
+}
+
+/// [`write_calibration`], the report naming each frame's image file from `labels`.
+/// The report is written last: it embeds the files it finds beside it.
+pub fn write_calibration_labelled(
+    dir: &Path,
+    c: &Calibration,
+    labels: &FrameLabels,
+) -> Result<Written> {
     let written = write_models(dir, &CalibrationJson::from(c))?;
     write_atomic(&dir.join("outliers.csv"), &suspects_csv(c)?)?;
+    html_report::write_calibration_report(dir, c, labels)?;
     Ok(written)
 }
 

@@ -10,10 +10,29 @@ use crate::model::synthetic::{self, Truth};
 use crate::model::target::Target;
 use std::path::Path;
 
+/// The name of each image a frame came from, by (camera index, frame number), where
+/// the data source knows it (photos); reports show it beside the frame number.
+pub type FrameLabels = std::collections::BTreeMap<(usize, i64), String>;
+
+/// What a config's `[data]` gives: the dataset, the truth of a synthetic preset and
+/// the image file names.
+#[derive(Debug, Clone)]
+pub struct Loaded {
+    pub dataset: Dataset,
+    pub truth: Option<synthetic::Truth>,
+    pub labels: FrameLabels,
+}
+
 /// Loads a config's `[data]`; photos are detected (or taken from the detection
 /// cache) with a progress bar, their results written into the output dir and
 /// summarised on stderr.
 pub fn load_data(config: &Config) -> Result<(Dataset, Option<synthetic::Truth>)> {
+    let loaded = load_labelled(config)?;
+    Ok((loaded.dataset, loaded.truth))
+}
+
+/// [`load_data`], with the file name of every photo.
+pub fn load_labelled(config: &Config) -> Result<Loaded> {
     if let DataSource::Photos { .. } = &config.data {
         let run = crate::app::photos::detect_photos(
             &config.data,
@@ -25,9 +44,23 @@ pub fn load_data(config: &Config) -> Result<(Dataset, Option<synthetic::Truth>)>
         for line in crate::app::photos::summary(&run) {
             eprintln!("{line}");
         }
-        return Ok((run.dataset, None));
+        let labels = run
+            .images
+            .iter()
+            .map(|r| ((r.file.camera, r.file.frame), r.file.name.clone()))
+            .collect();
+        return Ok(Loaded {
+            dataset: run.dataset,
+            truth: None,
+            labels,
+        });
     }
-    load_source(&config.data, config.target, &config.cameras)
+    let (dataset, truth) = load_source(&config.data, config.target, &config.cameras)?;
+    Ok(Loaded {
+        dataset,
+        truth,
+        labels: FrameLabels::new(),
+    })
 }
 
 /// Loads the dataset a data source names, for the given board and cameras.
