@@ -33,6 +33,13 @@ pub struct Axes<'a> {
     pub y: &'a str,
 }
 
+/// Tick labels (plotters sizes; the SVG shows them at 1/1.24 of this).
+pub const LABEL: (&str, u32) = ("sans-serif", 15);
+/// Axis titles.
+pub const AXIS_DESC: (&str, u32) = ("sans-serif", 16);
+/// Figure titles.
+pub const TITLE: (&str, u32) = ("sans-serif", 20);
+
 /// Colours of the series, in order.
 pub const PALETTE: [RGBColor; 4] = [
     RGBColor(31, 119, 180),
@@ -70,10 +77,19 @@ fn mean_std(v: &[f64]) -> Option<(f64, f64)> {
     crate::model::metrics::Stat::of(v.iter().copied()).map(|s| (s.mean, s.std))
 }
 
+/// The value axis of a strip chart: every value, every mean ± std bar and every line.
 fn value_range(series: &[Series], lines: &[HLine]) -> (f64, f64) {
+    let bars = series.iter().flat_map(|s| s.groups.iter()).flat_map(|g| {
+        let finite: Vec<f64> = g.iter().copied().filter(|v| v.is_finite()).collect();
+        mean_std(&finite)
+            .map(|(m, sd)| [m - sd, m + sd])
+            .into_iter()
+            .flatten()
+    });
     let vals = series
         .iter()
         .flat_map(|s| s.groups.iter().flatten().copied())
+        .chain(bars)
         .chain(lines.iter().map(|l| l.value));
     padded_range(vals, 0.08)
 }
@@ -116,32 +132,41 @@ fn strip_points(s: &Series, offset: f64, width: f64) -> Vec<(f64, f64)> {
     points
 }
 
-/// A legend box in the upper right corner of a chart.
-fn legend<'a, DB: DrawingBackend + 'a, CT: plotters::coord::CoordTranslate>(
-    chart: &mut ChartContext<'a, DB, CT>,
-) -> Drawn {
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK.mix(0.3))
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()
-        .map_err(pe)
+/// The key of a strip chart: a dot per series, a line per reference line.
+fn strip_key(series: &[Series], lines: &[HLine]) -> Vec<(Mark, String)> {
+    let mut items: Vec<(Mark, String)> = series
+        .iter()
+        .map(|s| (Mark::Dot(s.color), s.name.to_string()))
+        .collect();
+    items.extend(
+        lines
+            .iter()
+            .map(|l| (Mark::Line(l.color), l.name.to_string())),
+    );
+    items
 }
 
-/// Draws one strip chart (points per category and series, mean ± std bars) on `area`.
+/// Draws one strip chart on `area`: its title, its key when `key` is set, then a
+/// dot per value per category and series, with mean ± std bars.
 pub fn strip_chart<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     title: &str,
     axes: Axes,
     categories: &[String],
-    series: &[Series],
-    lines: &[HLine],
+    (series, lines): (&[Series], &[HLine]),
+    key: bool,
 ) -> Drawn {
     let (lo, hi) = value_range(series, lines);
     let n = categories.len() as f64;
-    let mut chart = ChartBuilder::on(area)
-        .caption(title, ("sans-serif", 17))
+    let area = area.titled(title, TITLE).map_err(pe)?;
+    let area = if key {
+        let (strip, rest) = area.split_vertically(28);
+        key_strip(&strip, 90, &strip_key(series, lines))?;
+        rest
+    } else {
+        area
+    };
+    let mut chart = ChartBuilder::on(&area)
         .margin(12)
         .x_label_area_size(42)
         .y_label_area_size(78)
@@ -150,7 +175,11 @@ pub fn strip_chart<DB: DrawingBackend>(
     let cats = categories.to_vec();
     chart
         .configure_mesh()
+        .label_style(LABEL)
+        .axis_desc_style(AXIS_DESC)
         .disable_x_mesh()
+        .light_line_style(BLACK.mix(0.04))
+        .bold_line_style(BLACK.mix(0.15))
         .x_labels(categories.len() + 1)
         .x_label_formatter(&move |x| category_label(&cats, *x))
         .y_label_formatter(&tick)
@@ -168,9 +197,7 @@ pub fn strip_chart<DB: DrawingBackend>(
                     .iter()
                     .map(|&p| Circle::new(p, 2, s.color.mix(0.45).filled())),
             )
-            .map_err(pe)?
-            .label(s.name)
-            .legend(move |(x, y)| Circle::new((x, y), 4, s.color.filled()));
+            .map_err(pe)?;
         for (ci, g) in s.groups.iter().enumerate() {
             let finite: Vec<f64> = g.iter().copied().filter(|v| v.is_finite()).collect();
             if let Some((m, sd)) = mean_std(&finite) {
@@ -185,18 +212,15 @@ pub fn strip_chart<DB: DrawingBackend>(
             }
         }
     }
-    for l in lines {
-        let color = l.color;
-        chart
-            .draw_series([PathElement::new(
+    chart
+        .draw_series(lines.iter().map(|l| {
+            PathElement::new(
                 vec![(-0.5, l.value), (n - 0.5, l.value)],
-                color.stroke_width(1),
-            )])
-            .map_err(pe)?
-            .label(l.name)
-            .legend(move |(x, y)| PathElement::new(vec![(x - 6, y), (x + 6, y)], color));
-    }
-    legend(&mut chart)
+                l.color.stroke_width(1),
+            )
+        }))
+        .map_err(pe)?;
+    Ok(())
 }
 
 /// One strip chart as SVG text.
@@ -207,15 +231,16 @@ pub fn strip_chart_svg(
     series: &[Series],
     lines: &[HLine],
 ) -> Result<String> {
-    svg(title, (760, 440), |root| {
-        strip_chart(root, title, axes, categories, series, lines)
+    svg(title, (760, 460), |root| {
+        strip_chart(root, title, axes, categories, (series, lines), true)
     })
 }
 
 /// One panel of [`panels_svg`]: title, axes, series and reference lines.
 pub type Panel<'a> = (String, Axes<'a>, Vec<Series<'a>>, Vec<HLine<'a>>);
 
-/// Strip charts in a grid of `columns` columns, as SVG text.
+/// Strip charts in a grid of `columns` columns under one key, as SVG text; the
+/// key is the first panel's (every panel should use the same colours and lines).
 pub fn panels_svg(
     name: &str,
     panels: &[Panel],
@@ -225,11 +250,15 @@ pub fn panels_svg(
     let columns = columns.clamp(1, panels.len().max(1));
     let rows = panels.len().div_ceil(columns).max(1);
     let (w, h) = if columns == 1 { (760, 440) } else { (400, 330) };
-    let size = (w * columns as u32, h * rows as u32);
+    let size = (w * columns as u32, h * rows as u32 + 30);
     svg(name, size, |root| {
-        let areas = root.split_evenly((rows, columns));
+        let (strip, rest) = root.split_vertically(30);
+        if let Some((_, _, series, lines)) = panels.first() {
+            key_strip(&strip, 90, &strip_key(series, lines))?;
+        }
+        let areas = rest.split_evenly((rows, columns));
         for (area, (title, axes, series, lines)) in areas.iter().zip(panels) {
-            strip_chart(area, title, *axes, categories, series, lines)?;
+            strip_chart(area, title, *axes, categories, (series, lines), false)?;
         }
         Ok(())
     })
@@ -301,14 +330,16 @@ pub fn colour_bar<DB: DrawingBackend>(
         .margin_bottom(50)
         .margin_right(8)
         .y_label_area_size(58)
-        .caption(caption, ("sans-serif", 14))
+        .caption(caption, AXIS_DESC)
         .build_cartesian_2d(0.0..1.0, lo..hi)
         .map_err(pe)?;
     bar.configure_mesh()
+        .label_style(LABEL)
+        .axis_desc_style(AXIS_DESC)
         .disable_mesh()
         .disable_x_axis()
         .y_label_formatter(&tick)
-        .y_label_style(("sans-serif", 12))
+        .y_label_style(LABEL)
         .draw()
         .map_err(pe)?;
     let steps = 64;
@@ -392,7 +423,7 @@ pub fn key_strip<DB: DrawingBackend>(
 ) -> Drawn {
     let y = 14i32;
     let mut x = x;
-    let text = ("sans-serif", 13).into_font().color(&BLACK);
+    let text = ("sans-serif", 15).into_font().color(&BLACK);
     for (mark, label) in items {
         let width = match *mark {
             Mark::Arrow(len, colour) => {
@@ -426,8 +457,8 @@ pub fn key_strip<DB: DrawingBackend>(
         x += width + 6;
         area.draw(&Text::new(label.clone(), (x, y - 7), text.clone()))
             .map_err(pe)?;
-        // About 7 pixels per character of the 13-pixel sans-serif.
-        x += 7 * label.chars().count() as i32 + 22;
+        // About 7 pixels per character of this sans-serif (12 px in the SVG).
+        x += 7 * label.chars().count() as i32 + 24;
     }
     Ok(())
 }
@@ -453,7 +484,7 @@ pub fn deformation_chart<DB: DrawingBackend>(
     let width = root.dim_in_pixel().0;
     let (plot, legend) = root.split_horizontally(width.saturating_sub(110));
     let mut chart = ChartBuilder::on(&plot)
-        .caption(title, ("sans-serif", 16))
+        .caption(title, TITLE)
         .margin(10)
         .x_label_area_size(40)
         .y_label_area_size(60)
@@ -461,6 +492,8 @@ pub fn deformation_chart<DB: DrawingBackend>(
         .map_err(pe)?;
     chart
         .configure_mesh()
+        .label_style(LABEL)
+        .axis_desc_style(AXIS_DESC)
         .disable_mesh()
         .x_label_formatter(&tick)
         .y_label_formatter(&tick)

@@ -703,12 +703,8 @@ fn plot_intrinsics(h: &Header, cats: &[String], rows: &[Row]) -> Result<String> 
         .iter()
         .map(|(k, name, title, axis)| {
             let series = vec![Series {
-                name: title,
-                color: colour(if param_unit(h.cameras[*k].model, name) == "px" {
-                    0
-                } else {
-                    2
-                }),
+                name: "one subset (bars: mean ± std)",
+                color: colour(0),
                 groups: camera_groups(h, rows, *k, |c| c.intrinsics.get(name)),
             }];
             (
@@ -722,7 +718,7 @@ fn plot_intrinsics(h: &Header, cats: &[String], rows: &[Row]) -> Result<String> 
             )
         })
         .collect();
-    plots::panels_svg("intrinsics.svg", &panels, cats, 4)
+    plots::panels_svg("intrinsics.svg", &panels, cats, 3)
 }
 
 /// `mapping.svg`: each camera's mapping error to the reference and to the truth.
@@ -786,7 +782,7 @@ fn plot_bend(h: &Header, rows: &[Row]) -> Result<Option<String>> {
         })
         .collect();
     let series = [Series {
-        name: "images",
+        name: "one image of a subset (bars: mean ± std)",
         color: colour(0),
         groups,
     }];

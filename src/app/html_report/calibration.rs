@@ -456,7 +456,7 @@ fn distortion_block(c: &Calibration, k: usize) -> Result<String> {
     if scale.max_px > scale.clip_px {
         let _ = write!(
             caption,
-            " The colours stop at the image diagonal, {:.0} px.",
+            " The colours stop at the image diagonal, {:.0} px, and longer arrows are cut to it.",
             scale.clip_px
         );
     }

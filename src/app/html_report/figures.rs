@@ -4,7 +4,7 @@
 //! drawn comes from `fields`; the shared primitives (arrows, colour maps, colour
 //! bars, the bend surface) from `app::plots`.
 use crate::app::html_report::fields::{contour_segments, Arrows, Grid};
-use crate::app::plots::{self, pe, short, Drawn, Mark, PALETTE};
+use crate::app::plots::{self, pe, short, Drawn, Mark, AXIS_DESC, LABEL, PALETTE, TITLE};
 use crate::error::Result;
 use crate::model::board::{Method, Paraboloid};
 use crate::model::target::Target;
@@ -53,7 +53,7 @@ fn image_chart<'a, DB: DrawingBackend + 'a>(
 > {
     let (w, h) = (width as f64, height as f64);
     let mut chart = ChartBuilder::on(area)
-        .caption(title, ("sans-serif", 17))
+        .caption(title, TITLE)
         .margin(MARGIN)
         .x_label_area_size(X_AXIS)
         .y_label_area_size(Y_AXIS)
@@ -61,6 +61,8 @@ fn image_chart<'a, DB: DrawingBackend + 'a>(
         .map_err(pe)?;
     chart
         .configure_mesh()
+        .label_style(LABEL)
+        .axis_desc_style(AXIS_DESC)
         .disable_mesh()
         .x_label_formatter(&plots::tick)
         .y_label_formatter(&plots::tick)
@@ -158,7 +160,7 @@ pub fn rmse_bars(
     plots::svg(title, size, |root| {
         let (top, key) = root.split_vertically(size.1 - KEY);
         let mut chart = ChartBuilder::on(&top)
-            .caption(title, ("sans-serif", 17))
+            .caption(title, TITLE)
             .margin(MARGIN)
             .x_label_area_size(X_AXIS)
             .y_label_area_size(label_w)
@@ -166,10 +168,12 @@ pub fn rmse_bars(
             .map_err(pe)?;
         chart
             .configure_mesh()
+            .label_style(LABEL)
+            .axis_desc_style(AXIS_DESC)
             .disable_y_mesh()
             .y_labels(n + 1)
             .y_label_formatter(&|y| plots::category_label(&labels, *y))
-            .y_label_style(("sans-serif", 12))
+            .y_label_style(LABEL)
             .x_label_formatter(&plots::tick)
             .x_desc("RMSE of the image's corners (px) = √(Σ‖u − p‖² / n)")
             .draw()
@@ -273,7 +277,9 @@ pub fn distortion_map(
             .filter_map(|(i, j)| {
                 let d = grid.values[j * grid.nx + i]?;
                 let p = grid.centre(i, j);
-                let v = (d[0] * s.arrow_scale, d[1] * s.arrow_scale);
+                // Beyond the colour scale's top an arrow keeps its direction, not its length.
+                let cut = (s.clip_px / d[0].hypot(d[1]).max(1e-12)).min(1.0);
+                let v = (d[0] * s.arrow_scale * cut, d[1] * s.arrow_scale * cut);
                 Some(PathElement::new(
                     plots::arrow(p, v, 0.3),
                     WHITE.stroke_width(2),
@@ -363,7 +369,7 @@ fn draw_contours<DB: DrawingBackend, T>(
             } else {
                 WHITE
             };
-            let style = ("sans-serif", 13)
+            let style = ("sans-serif", 16)
                 .into_font()
                 .color(&ink)
                 .pos(Pos::new(HPos::Center, VPos::Center));
@@ -439,7 +445,7 @@ pub fn correction_map(
     plots::svg(title, size, |root| {
         let (main, legend) = root.split_horizontally(size.0 - bar);
         let mut chart = ChartBuilder::on(&main)
-            .caption(title, ("sans-serif", 16))
+            .caption(title, TITLE)
             .margin(MARGIN)
             .x_label_area_size(X_AXIS)
             .y_label_area_size(Y_AXIS)
@@ -447,6 +453,8 @@ pub fn correction_map(
             .map_err(pe)?;
         chart
             .configure_mesh()
+            .label_style(LABEL)
+            .axis_desc_style(AXIS_DESC)
             .disable_mesh()
             .x_label_formatter(&plots::tick)
             .y_label_formatter(&plots::tick)
@@ -528,7 +536,7 @@ pub fn bend_sequence(
         bends.iter().map(|b| b.c * 1e3).collect(),
     ];
     plots::svg(title, (FIGURE_WIDTH, 680), |root| {
-        let root = root.titled(title, ("sans-serif", 17)).map_err(pe)?;
+        let root = root.titled(title, TITLE).map_err(pe)?;
         let (key, rest) = root.split_vertically(KEY);
         let items: Vec<(Mark, String)> = names
             .iter()
@@ -573,6 +581,8 @@ fn sequence_chart<'a, DB: DrawingBackend + 'a>(
         .map_err(pe)?;
     chart
         .configure_mesh()
+        .label_style(LABEL)
+        .axis_desc_style(AXIS_DESC)
         .light_line_style(WHITE)
         .bold_line_style(BLACK.mix(0.12))
         // Frames are whole numbers: no tick between two of them.
@@ -610,13 +620,23 @@ fn deflection_chart<DB: DrawingBackend>(
         .draw_series(pts.iter().map(|&p| Circle::new(p, 2, PALETTE[0].filled())))
         .map_err(pe)?;
     if let Some(&p) = pts.get(worst) {
-        let style = ("sans-serif", 13).into_font().color(&PALETTE[3]);
+        // The label goes left of a point in the right third, so it stays in the figure.
+        let right = p.0 > x_range.0 + 0.66 * (x_range.1 - x_range.0);
+        let (h, dx) = if right {
+            (HPos::Right, -10)
+        } else {
+            (HPos::Left, 10)
+        };
+        let style = ("sans-serif", 16)
+            .into_font()
+            .color(&PALETTE[3])
+            .pos(Pos::new(h, VPos::Center));
         chart
             .draw_series([Circle::new(p, 6, PALETTE[3].stroke_width(2))])
             .map_err(pe)?;
         chart
             .draw_series([
-                EmptyElement::at(p) + Text::new(format!("worst: frame {}", p.0), (8, -6), style)
+                EmptyElement::at(p) + Text::new(format!("worst: frame {}", p.0), (dx, 0), style)
             ])
             .map_err(pe)?;
     }

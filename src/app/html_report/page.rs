@@ -220,7 +220,7 @@ table{border-collapse:collapse;margin:8px 0;font-size:.92em}
 th,td{border:1px solid #d0d5dc;padding:3px 8px;text-align:left;vertical-align:top}
 th{background:#f3f5f8}
 td{font-variant-numeric:tabular-nums}
-pre{background:#f6f7f9;border:1px solid #e3e6ea;padding:10px;overflow-x:auto;font-size:.88em}
+pre{background:#f6f7f9;border:1px solid #e3e6ea;padding:10px;white-space:pre-wrap;font-size:.88em}
 code{background:#f1f2f4;padding:0 3px;border-radius:3px}
 ul.verdicts{list-style:none;padding:0}
 ul.verdicts li{margin:4px 0;padding:6px 10px;border-left:6px solid #999;background:#f6f7f9}
