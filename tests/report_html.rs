@@ -320,15 +320,15 @@ fn report_embeds_the_uncertainty_map_and_names_the_images() {
     let (d, _) = common::data(Preset::T2, 8, 3, 1.0, 1.0);
     let c = common::run(&d, Method::Dynamic, Loss::Cauchy);
     // Σ n·rmse² over the images is the total squared residual.
-    let stats = html_report::fields::view_stats(&c);
+    let stats = html_report::fields::views_worst_first(&c);
     let n: usize = stats.iter().map(|v| v.observations).sum();
     let total: f64 = stats
         .iter()
-        .map(|v| v.observations as f64 * v.rmse_px.powi(2))
+        .map(|v| v.observations as f64 * v.rmse_px().powi(2))
         .sum();
     assert_eq!(n, c.dataset.observations.len());
     assert!(((total / n as f64).sqrt() - c.rmse_px).abs() < 1e-12);
-    assert!(stats.windows(2).all(|w| w[0].rmse_px >= w[1].rmse_px));
+    assert!(stats.windows(2).all(|w| w[0].rmse_px() >= w[1].rmse_px()));
     let worst = c.dataset.frame_ids[stats[0].frame];
     let labels: FrameLabels = [((0, worst), "photos/the-worst-one.png".to_string())].into();
     let dir = tempfile::tempdir().unwrap();

@@ -134,9 +134,9 @@ impl From<&Calibration> for CalibrationJson {
         let d = &c.dataset;
         let mut sq = vec![0.0; d.num_frames()];
         let mut n = vec![0usize; d.num_frames()];
-        for (o, r) in d.observations.iter().zip(c.residuals.chunks(2)) {
-            sq[o.frame] += r[0] * r[0] + r[1] * r[1];
-            n[o.frame] += 1;
+        for v in c.view_residuals() {
+            sq[v.frame] += v.sum_sq_px2;
+            n[v.frame] += v.observations;
         }
         let bends = c.method.has_paraboloid();
         let trust = c.trust(c.detector_noise_px);

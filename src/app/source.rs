@@ -18,8 +18,11 @@ pub type FrameLabels = std::collections::BTreeMap<(usize, i64), String>;
 /// the image file names.
 #[derive(Debug, Clone)]
 pub struct Loaded {
+    /// The observations, cameras and board.
     pub dataset: Dataset,
+    /// The truth of a synthetic preset.
     pub truth: Option<synthetic::Truth>,
+    /// The image file of each (camera, frame), where known.
     pub labels: FrameLabels,
 }
 

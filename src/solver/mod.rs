@@ -4,5 +4,6 @@
 mod bridge;
 pub mod calibrate;
 pub mod problem;
+pub mod residuals;
 pub mod robust;
 mod trust;

@@ -4,7 +4,7 @@
 //! correction, bends along the sequence, the worst bend), every frame in a table,
 //! and the definitions of the metrics shown. Figures come from `figures`; this
 //! module only decides what goes where and says what each figure shows.
-use crate::app::html_report::fields::{self, ViewStat};
+use crate::app::html_report::fields;
 use crate::app::html_report::figures;
 use crate::app::html_report::page::{self, escape, para, subsection, Page};
 use crate::app::plots;
@@ -14,6 +14,7 @@ use crate::app::source::FrameLabels;
 use crate::error::Result;
 use crate::model::board::Method;
 use crate::solver::calibrate::Calibration;
+use crate::solver::residuals::ViewResidual;
 use std::fmt::Write;
 
 /// Most views in a camera's RMSE bar chart: the worst ones (all are in the frame table).
@@ -41,7 +42,7 @@ pub fn calibration_page(
     );
     let mut p = Page::new("deformcal calibration report", &lead);
     p.section("summary", "Summary and verdicts", summary_section(c));
-    let stats = fields::view_stats(c);
+    let stats = fields::views_worst_first(c);
     for (k, cam) in d.cameras.iter().enumerate() {
         let body = camera_section(c, k, &stats, labels, uncertainty.get(k).cloned().flatten())?;
         p.section(
@@ -119,9 +120,9 @@ fn verdicts(c: &Calibration) -> Vec<Verdict> {
     v.push((
         class,
         format!(
-            "{} of {total} observations ({:.1}%) rejected as outliers (beyond {}σ of their neighbours).",
+            "{} of {total} observations ({}%) rejected as outliers (beyond {}σ of their neighbours).",
             c.rejected.len(),
-            100.0 * fraction,
+            percent(fraction),
             c.settings.outlier_k
         ),
     ));
@@ -129,6 +130,16 @@ fn verdicts(c: &Calibration) -> Vec<Verdict> {
         v.push(("warn", format!("Warning: {w}")));
     }
     v
+}
+
+/// A fraction in percent, with two decimals below 1 % so a few do not read as 0.
+fn percent(fraction: f64) -> String {
+    let p = 100.0 * fraction;
+    if p > 0.0 && p < 1.0 {
+        format!("{p:.2}")
+    } else {
+        format!("{p:.1}")
+    }
 }
 
 /// The verdicts, the key figures and the printed summary.
@@ -224,7 +235,7 @@ fn largest_correction(c: &Calibration) -> f64 {
 fn camera_section(
     c: &Calibration,
     k: usize,
-    stats: &[ViewStat],
+    stats: &[ViewResidual],
     labels: &FrameLabels,
     uncertainty: Option<Vec<u8>>,
 ) -> Result<String> {
@@ -321,8 +332,8 @@ fn residuals_block(c: &Calibration, k: usize) -> Result<String> {
     let caption = format!(
         "Each arrow starts at an observed corner and points along its residual, observed − projected pixel, \
          drawn {} times longer than it is (the key gives the length of a residual in pixels); {shown}. \
-         RMS residual of this camera: {:.4} px. Red crosses: the {} observations rejected as outliers \
-         (not part of the fit; their residuals are in `outliers.csv`). A pattern in the arrows (a swirl, \
+         RMS residual of this camera: {:.4} px. Red crosses: observations rejected as outliers ({}; \
+         not part of the fit; their residuals are in `outliers.csv`). A pattern in the arrows (a swirl, \
          arrows growing toward the edges) is a model error; noise points every way.",
         short(scale),
         a.rms_px,
@@ -339,28 +350,24 @@ fn residuals_block(c: &Calibration, k: usize) -> Result<String> {
 fn rmse_block(
     c: &Calibration,
     k: usize,
-    stats: &[ViewStat],
+    stats: &[ViewResidual],
     labels: &FrameLabels,
 ) -> Result<String> {
     let cam = &c.dataset.cameras[k];
-    let own: Vec<&ViewStat> = stats.iter().filter(|v| v.camera == k).collect();
+    let own: Vec<&ViewResidual> = stats.iter().filter(|v| v.camera == k).collect();
     let bars: Vec<(String, f64)> = own
         .iter()
         .take(MAX_BARS)
-        .map(|v| (view_label(c, labels, k, v.frame), v.rmse_px))
+        .map(|v| (view_label(c, labels, k, v.frame), v.rmse_px()))
         .collect();
     let camera_rmse = {
         let (n, sq) = own.iter().fold((0usize, 0.0), |(n, sq), v| {
-            (
-                n + v.observations,
-                sq + v.rmse_px.powi(2) * v.observations as f64,
-            )
+            (n + v.observations, sq + v.sum_sq_px2)
         });
         (sq / n.max(1) as f64).sqrt()
     };
-    // E[rmse²] = 2σ̂²(1 − p/N) for a model without systematic error (SPEC §3a).
     let noise = c.trust(c.detector_noise_px).map(|t| {
-        (2.0 * t.noise_px.powi(2) * (1.0 - t.parameters as f64 / t.residuals.max(1) as f64))
+        crate::model::trust::expected_rmse2(t.noise_px, t.parameters, t.residuals)
             .max(0.0)
             .sqrt()
     });
@@ -607,7 +614,7 @@ fn bends_block(c: &Calibration) -> Result<String> {
 }
 
 /// Every frame: its images, observations, RMSE and bend.
-fn frames_section(c: &Calibration, stats: &[ViewStat], labels: &FrameLabels) -> String {
+fn frames_section(c: &Calibration, stats: &[ViewResidual], labels: &FrameLabels) -> String {
     let d = &c.dataset;
     let t = &d.target;
     let bends = c.method.has_paraboloid();
@@ -621,7 +628,7 @@ fn frames_section(c: &Calibration, stats: &[ViewStat], labels: &FrameLabels) -> 
     if bends {
         head.extend(["a (mm/m²)", "b (mm/m²)", "c (mm/m²)", "max |Δz| (mm)"].map(String::from));
     }
-    let mut views: Vec<&ViewStat> = stats.iter().collect();
+    let mut views: Vec<&ViewResidual> = stats.iter().collect();
     views.sort_by_key(|v| (v.frame, v.camera));
     let rows: Vec<Vec<String>> = views
         .iter()
@@ -634,7 +641,7 @@ fn frames_section(c: &Calibration, stats: &[ViewStat], labels: &FrameLabels) -> 
                     .cloned()
                     .unwrap_or_default(),
                 v.observations.to_string(),
-                format!("{:.4}", v.rmse_px),
+                format!("{:.4}", v.rmse_px()),
             ];
             if bends {
                 let b = c.state.deformations[v.frame];

@@ -1,44 +1,20 @@
 //! The numbers behind the calibration report's figures, computed from a
-//! [`Calibration`]: the residual of every view, the residual arrows to draw (every
+//! [`Calibration`]: the views worst first, the residual arrows to draw (every
 //! k-th when there are too many), the lens's displacement from its own pinhole over
 //! the image, and contour lines of a field. No drawing here (`figures` draws).
 use crate::model::lens::Intrinsics;
 use crate::solver::calibrate::Calibration;
+use crate::solver::residuals::ViewResidual;
 use nalgebra::{Vector2, Vector3};
 
-/// The residual of one view (camera, frame).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ViewStat {
-    pub camera: usize,
-    /// Dense frame index into the dataset's `frame_ids`.
-    pub frame: usize,
-    pub observations: usize,
-    /// √(Σ‖u − p‖² / n) over the view's corners, pixels.
-    pub rmse_px: f64,
-}
-
 /// Every view's residual, worst first (ties in frame order).
-pub fn view_stats(c: &Calibration) -> Vec<ViewStat> {
-    let frames = c.dataset.num_frames();
-    let cameras = c.dataset.cameras.len();
-    let mut sums = vec![(0usize, 0.0f64); frames * cameras];
-    for (o, r) in c.dataset.observations.iter().zip(c.residuals.chunks(2)) {
-        let s = &mut sums[o.camera * frames + o.frame];
-        s.0 += 1;
-        s.1 += r[0] * r[0] + r[1] * r[1];
-    }
-    let mut out: Vec<ViewStat> = sums
-        .iter()
-        .enumerate()
-        .filter(|(_, s)| s.0 > 0)
-        .map(|(i, &(n, sq))| ViewStat {
-            camera: i / frames,
-            frame: i % frames,
-            observations: n,
-            rmse_px: (sq / n as f64).sqrt(),
-        })
-        .collect();
-    out.sort_by(|a, b| b.rmse_px.total_cmp(&a.rmse_px).then(a.frame.cmp(&b.frame)));
+pub fn views_worst_first(c: &Calibration) -> Vec<ViewResidual> {
+    let mut out = c.view_residuals();
+    out.sort_by(|a, b| {
+        b.rmse_px()
+            .total_cmp(&a.rmse_px())
+            .then(a.frame.cmp(&b.frame))
+    });
     out
 }
 
@@ -49,6 +25,7 @@ pub const MAX_ARROWS: usize = 2500;
 /// A camera's residual arrows: (observed pixel, residual observed − projected).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Arrows {
+    /// The arrows drawn: (observed pixel, residual).
     pub arrows: Vec<([f64; 2], [f64; 2])>,
     /// The camera's observations.
     pub total: usize,
@@ -87,11 +64,15 @@ pub fn residual_arrows(c: &Calibration, camera: usize) -> Arrows {
 /// Values on a regular grid of cell centres over an image, row-major (x fastest).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Grid<T> {
+    /// Cells across.
     pub nx: usize,
+    /// Cells down.
     pub ny: usize,
     /// Cell size in pixels.
     pub dx: f64,
+    /// Cell height in pixels.
     pub dy: f64,
+    /// One value per cell, row-major.
     pub values: Vec<T>,
 }
 

@@ -148,7 +148,8 @@ pub fn rmse_bars(
     let n = bars.len().max(1);
     let labels: Vec<String> = bars.iter().map(|(l, _)| tail(l, 40)).collect();
     let longest = labels.iter().map(|l| l.chars().count()).max().unwrap_or(5);
-    let label_w = (longest as u32 * 7 + 16).clamp(70, 320);
+    // Room for the labels and the axis title beside them.
+    let label_w = (longest as u32 * 8 + 40).clamp(90, 360);
     let size = (FIGURE_WIDTH, 18 * n as u32 + 150);
     let max = bars
         .iter()
@@ -176,6 +177,7 @@ pub fn rmse_bars(
             .y_label_style(LABEL)
             .x_label_formatter(&plots::tick)
             .x_desc("RMSE of the image's corners (px) = √(Σ‖u − p‖² / n)")
+            .y_desc("image, worst first")
             .draw()
             .map_err(pe)?;
         chart
@@ -483,25 +485,7 @@ pub fn correction_map(
                 )
             }))
             .map_err(pe)?;
-        let mark = s * 0.45;
-        chart
-            .draw_series(gauge.iter().filter_map(|&i| points.get(i)).map(|p| {
-                let (x, y) = (p.x * 1e3, p.y * 1e3);
-                Rectangle::new(
-                    [(x - mark, y - mark), (x + mark, y + mark)],
-                    RED.stroke_width(2),
-                )
-            }))
-            .map_err(pe)?;
-        chart
-            .draw_series(frozen.iter().filter_map(|&i| points.get(i)).map(|p| {
-                Cross::new(
-                    (p.x * 1e3, p.y * 1e3),
-                    5,
-                    RGBColor(90, 90, 90).stroke_width(2),
-                )
-            }))
-            .map_err(pe)?;
+        mark_held(&mut chart, target, gauge, frozen)?;
         let caption = if with_z { "Δz (mm)" } else { "in-plane (mm)" };
         let range = if with_z {
             (-limit * 1e3, limit * 1e3)
@@ -510,6 +494,36 @@ pub fn correction_map(
         };
         plots::colour_bar(&legend, caption, range, |v| pale(colour(v / 1e3)))
     })
+}
+
+/// Boxes the gauge corners and crosses the corners held at zero, on a board chart in mm.
+fn mark_held<DB: DrawingBackend>(
+    chart: &mut PixelChart<'_, DB>,
+    target: &Target,
+    gauge: &[usize],
+    frozen: &[usize],
+) -> Drawn {
+    let points = target.nominal_points();
+    let mark = target.spacing * 1e3 / 2.0 * 0.45;
+    chart
+        .draw_series(gauge.iter().filter_map(|&i| points.get(i)).map(|p| {
+            let (x, y) = (p.x * 1e3, p.y * 1e3);
+            Rectangle::new(
+                [(x - mark, y - mark), (x + mark, y + mark)],
+                RED.stroke_width(2),
+            )
+        }))
+        .map_err(pe)?;
+    chart
+        .draw_series(frozen.iter().filter_map(|&i| points.get(i)).map(|p| {
+            Cross::new(
+                (p.x * 1e3, p.y * 1e3),
+                5,
+                RGBColor(90, 90, 90).stroke_width(2),
+            )
+        }))
+        .map_err(pe)?;
+    Ok(())
 }
 
 /// A colour as it shows at 60 % opacity on white.

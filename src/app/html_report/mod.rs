@@ -20,7 +20,7 @@ use crate::solver::calibrate::Calibration;
 use std::path::Path;
 
 /// The report's file name, in every output directory that has one.
-pub const REPORT_FILE: &str = "report.html";
+pub use crate::app::fsio::REPORT_HTML as REPORT_FILE;
 
 /// Largest uncertainty map embedded; a larger file is left out of the report.
 const MAX_EMBEDDED_BYTES: u64 = 16 << 20;

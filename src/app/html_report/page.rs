@@ -22,12 +22,17 @@ pub fn escape(s: &str) -> String {
 
 /// A sentence with `code` spans (the one markup the reports' sentences use) as HTML.
 pub fn inline(s: &str) -> String {
+    let parts: Vec<&str> = s.split('`').collect();
+    let ticks = parts.len() - 1;
     let mut out = String::new();
-    for (i, part) in s.split('`').enumerate() {
-        // An unmatched backtick leaves its tail as plain text.
-        if i % 2 == 1 && s.matches('`').count() >= i + 1 {
+    for (i, part) in parts.iter().enumerate() {
+        if i % 2 == 1 && i < ticks {
             let _ = write!(out, "<code>{}</code>", escape(part));
         } else {
+            // The last of an odd number of backticks opens nothing: keep it as text.
+            if i % 2 == 1 {
+                out.push('`');
+            }
             out.push_str(&escape(part));
         }
     }
@@ -50,17 +55,24 @@ pub fn id_of(name: &str) -> String {
 /// A figure a table refers to: its SVG file, its alternative text and its caption.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Figure {
+    /// The SVG file's name, beside the report.
     pub file: String,
+    /// Alternative text (the markdown report's image text).
     pub alt: String,
+    /// What the figure shows: plain text with `code` spans.
     pub caption: String,
 }
 
 /// A table with a title, header cells, rows of cells and the figures that go with it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Table {
+    /// The heading above the table.
     pub title: String,
+    /// Header cells (with units).
     pub head: Vec<String>,
+    /// Body rows, as many cells as the header.
     pub rows: Vec<Vec<String>>,
+    /// Figures shown below the table.
     pub figures: Vec<Figure>,
 }
 

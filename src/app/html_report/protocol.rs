@@ -10,9 +10,13 @@ use std::fmt::Write;
 /// text of every figure the tables name, by file name.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DatasetReport {
+    /// The dataset's name (its section heading).
     pub name: String,
+    /// Opening paragraphs, plain text with `code` spans.
     pub intro: Vec<String>,
+    /// The tables, in order.
     pub tables: Vec<Table>,
+    /// SVG text by file name.
     pub figures: BTreeMap<String, String>,
 }
 
