@@ -463,8 +463,10 @@ fn distortion_block(c: &Calibration, k: usize) -> Result<String> {
     if scale.max_px > scale.clip_px {
         let _ = write!(
             caption,
-            " The colours stop at the image diagonal, {:.0} px, and longer arrows are cut to it.",
-            scale.clip_px
+            " The colours and arrows stop at {:.1} px, which {:.0} % of the image stays below \
+             (at most the image diagonal): beyond it the colour saturates and arrows keep their direction only.",
+            scale.clip_px,
+            100.0 * figures::CLIP_QUANTILE
         );
     }
     if missing > 0 {

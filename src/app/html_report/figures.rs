@@ -221,20 +221,32 @@ pub struct DistortionScale {
     pub arrow_scale: f64,
 }
 
-/// The scales of a distortion field: the colour range up to the image diagonal,
-/// about six contour levels, arrows about one cell long at most.
+/// The share of the image whose displacement the colour scale spans.
+pub const CLIP_QUANTILE: f64 = 0.97;
+
+/// The scales of a distortion field: the colour range up to the displacement
+/// [`CLIP_QUANTILE`] of the image stays below (at most the image diagonal), about
+/// six contour levels, arrows about one cell long at most.
 pub fn distortion_scale(
     grid: &Grid<Option<[f64; 2]>>,
     diagonal: f64,
     arrow_cell: f64,
 ) -> DistortionScale {
-    let max_px = grid
+    let mut lengths: Vec<f64> = grid
         .values
         .iter()
         .flatten()
         .map(|d| d[0].hypot(d[1]))
-        .fold(0.0, f64::max);
-    let clip_px = max_px.min(diagonal).max(1e-9);
+        .collect();
+    lengths.sort_by(f64::total_cmp);
+    let max_px = lengths.last().copied().unwrap_or(0.0);
+    // A polynomial lens can run away in the corners it was not fitted on: the
+    // scales follow the bulk of the image, not its most extreme cells.
+    let bulk = lengths
+        .get((lengths.len() as f64 * CLIP_QUANTILE) as usize)
+        .copied()
+        .unwrap_or(max_px);
+    let clip_px = bulk.min(diagonal).max(1e-9);
     let step_px = plots::nice(clip_px / 6.0);
     let arrow_scale = plots::nice(0.9 * arrow_cell / clip_px.max(1e-9));
     DistortionScale {
