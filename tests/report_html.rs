@@ -348,3 +348,39 @@ fn report_embeds_the_uncertainty_map_and_names_the_images() {
     assert!(!html.contains("No projection-uncertainty map"));
     assert_self_contained(&html);
 }
+
+/// Images read from a corners.vnl keep their file names for the report: each
+/// name labels the frame that holds exactly that image's corners.
+#[test]
+fn corners_vnl_names_label_their_frames() {
+    let (d, _) = common::data(Preset::T2, 5, 4, 1.0, 1.0);
+    let text = deformcal::app::corners_vnl::write_corners_vnl(&d);
+    let (read, _, names) = deformcal::app::corners_vnl::parse_corners_vnl_named(
+        text.as_bytes(),
+        Path::new("corners.vnl"),
+        d.target,
+        d.cameras.clone(),
+        &Default::default(),
+    )
+    .unwrap();
+    assert_eq!(names.len(), d.num_frames());
+    let corners = |ds: &deformcal::Dataset, frame: usize| -> Vec<(usize, [f64; 2])> {
+        ds.observations
+            .iter()
+            .filter(|o| o.frame == frame)
+            .map(|o| (o.corner, o.uv))
+            .collect()
+    };
+    for ((camera, frame), name) in &names {
+        assert_eq!(*camera, 0);
+        // The writer names an image `<camera>-<original frame id>.png`.
+        let id: i64 = name
+            .trim_start_matches("cam0-")
+            .trim_end_matches(".png")
+            .parse()
+            .unwrap();
+        let original = d.frame_ids.iter().position(|&f| f == id).unwrap();
+        let dense = read.frame_ids.iter().position(|f| f == frame).unwrap();
+        assert_eq!(corners(&read, dense), corners(&d, original), "{name}");
+    }
+}

@@ -290,8 +290,11 @@ fn group_rows(text: &str, path: &Path) -> Result<Vec<(String, Vec<Corner>)>> {
     Ok(images)
 }
 
-/// An image's corners with its camera and time-step key.
-type Keyed = (usize, String, Vec<Corner>);
+/// An image's corners with its camera, time-step key and file name.
+type Keyed = (usize, String, Vec<Corner>, String);
+
+/// The file name of each image, by (camera index, frame number).
+pub type FileNames = BTreeMap<(usize, i64), String>;
 
 /// Keys each image with a board by camera and time step; also counts those without.
 fn key_images(
@@ -332,7 +335,7 @@ fn key_images(
                 cameras[camera].name
             )));
         }
-        keyed.push((camera, key, corners));
+        keyed.push((camera, key, corners, file));
     }
     Ok((keyed, without_board))
 }
@@ -343,8 +346,8 @@ fn assemble(
     path: &Path,
     target: Target,
     cameras: Vec<CameraSpec>,
-) -> Result<Dataset> {
-    let keys: BTreeSet<&String> = keyed.iter().map(|(_, k, _)| k).collect();
+) -> Result<(Dataset, FileNames)> {
+    let keys: BTreeSet<&String> = keyed.iter().map(|(_, k, _, _)| k).collect();
     let frame_of: BTreeMap<&String, i64> = keys
         .into_iter()
         .enumerate()
@@ -352,7 +355,9 @@ fn assemble(
         .collect();
     let mut rows = Vec::new();
     let mut weights = Vec::new();
-    for (camera, key, corners) in keyed {
+    let mut files = FileNames::new();
+    for (camera, key, corners, file) in keyed {
+        files.insert((*camera, frame_of[key]), file.clone());
         for (i, c) in corners.iter().enumerate() {
             if let Some(uv) = c.xy {
                 rows.push((*camera, frame_of[key], i, uv));
@@ -367,7 +372,7 @@ fn assemble(
     for (o, w) in dataset.observations.iter_mut().zip(weights) {
         o.weight = w;
     }
-    Ok(dataset)
+    Ok((dataset, files))
 }
 
 /// Reads a `corners.vnl` (SPEC §5): one row per corner, `filename x y [level|weight]`,
@@ -380,8 +385,18 @@ pub fn read_corners_vnl(
     cameras: Vec<CameraSpec>,
     patterns: &BTreeMap<String, String>,
 ) -> Result<(Dataset, usize)> {
+    read_corners_vnl_named(path, target, cameras, patterns).map(|(d, n, _)| (d, n))
+}
+
+/// [`read_corners_vnl`], with each image's file name.
+pub fn read_corners_vnl_named(
+    path: &Path,
+    target: Target,
+    cameras: Vec<CameraSpec>,
+    patterns: &BTreeMap<String, String>,
+) -> Result<(Dataset, usize, FileNames)> {
     let bytes = crate::app::fsio::read_limited(path, crate::app::fsio::MAX_DATA_BYTES)?;
-    parse_corners_vnl(&bytes, path, target, cameras, patterns)
+    parse_corners_vnl_named(&bytes, path, target, cameras, patterns)
 }
 
 /// Parses `corners.vnl` bytes; `path` names the source in messages.
@@ -392,12 +407,23 @@ pub fn parse_corners_vnl(
     cameras: Vec<CameraSpec>,
     patterns: &BTreeMap<String, String>,
 ) -> Result<(Dataset, usize)> {
+    parse_corners_vnl_named(bytes, path, target, cameras, patterns).map(|(d, n, _)| (d, n))
+}
+
+/// [`parse_corners_vnl`], with each image's file name.
+pub fn parse_corners_vnl_named(
+    bytes: &[u8],
+    path: &Path,
+    target: Target,
+    cameras: Vec<CameraSpec>,
+    patterns: &BTreeMap<String, String>,
+) -> Result<(Dataset, usize, FileNames)> {
     let text = table_text(bytes, path)?;
     check_patterns_cover(path, &cameras, patterns)?;
     let images = group_rows(text, path)?;
     let (keyed, without_board) = key_images(images, path, &target, &cameras, patterns)?;
-    let dataset = assemble(&keyed, path, target, cameras)?;
-    Ok((dataset, without_board))
+    let (dataset, files) = assemble(&keyed, path, target, cameras)?;
+    Ok((dataset, without_board, files))
 }
 
 /// Writes a dataset as a `corners.vnl` with one image per (camera, frame) named

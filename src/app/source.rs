@@ -11,8 +11,8 @@ use crate::model::target::Target;
 use std::path::Path;
 
 /// The name of each image a frame came from, by (camera index, frame number), where
-/// the data source knows it (photos); reports show it beside the frame number.
-pub type FrameLabels = std::collections::BTreeMap<(usize, i64), String>;
+/// the data source knows it (photos, corners.vnl); reports show it beside the frame number.
+pub type FrameLabels = corners_vnl::FileNames;
 
 /// What a config's `[data]` gives: the dataset, the truth of a synthetic preset and
 /// the image file names.
@@ -34,7 +34,7 @@ pub fn load_data(config: &Config) -> Result<(Dataset, Option<synthetic::Truth>)>
     Ok((loaded.dataset, loaded.truth))
 }
 
-/// [`load_data`], with the file name of every photo.
+/// [`load_data`], with the file name of every photo or corners.vnl image.
 pub fn load_labelled(config: &Config) -> Result<Loaded> {
     if let DataSource::Photos { .. } = &config.data {
         let run = crate::app::photos::detect_photos(
@@ -54,6 +54,19 @@ pub fn load_labelled(config: &Config) -> Result<Loaded> {
             .collect();
         return Ok(Loaded {
             dataset: run.dataset,
+            truth: None,
+            labels,
+        });
+    }
+    if let DataSource::CornersVnl { path, patterns } = &config.data {
+        let (dataset, _, labels) = corners_vnl::read_corners_vnl_named(
+            path,
+            config.target,
+            config.cameras.clone(),
+            patterns,
+        )?;
+        return Ok(Loaded {
+            dataset,
             truth: None,
             labels,
         });
