@@ -3,6 +3,7 @@ use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand};
 use deformcal::app::config::Config;
 use deformcal::app::fsio::{self, OutputSet};
+use deformcal::app::html_report::REPORT_FILE;
 use deformcal::app::protocol::{self, Shard};
 use deformcal::app::{guard, lint, output, report};
 use deformcal::model::selection::{AutoSettings, MethodChoice};
@@ -266,7 +267,7 @@ fn run_calibrate(args: CalibrateArgs) -> Result<()> {
     result.warnings.extend(warnings.iter().cloned());
     let failure = guard::judge(&loaded.dataset, &request, &result, rules, &loaded.files);
     let written = match &failure {
-        None => output::write_calibration(set.path(), &result)?.warnings,
+        None => output::write_calibration_labelled(set.path(), &result, &loaded.files)?.warnings,
         Some(f) => {
             output::write_failed(set.path(), &result, f)?;
             Vec::new()
@@ -280,6 +281,10 @@ fn run_calibrate(args: CalibrateArgs) -> Result<()> {
     let Some(failure) = failure else {
         let path = config.output_dir.join("calibration.json");
         println!("  wrote {}", path.display());
+        println!(
+            "  report: {}",
+            config.output_dir.join(REPORT_FILE).display()
+        );
         return Ok(());
     };
     for h in &failure.hints {
@@ -643,9 +648,10 @@ fn run_batch(args: BatchArgs) -> Result<()> {
     let owned = names.clone();
     let set = OutputSet::begin(
         &args.output,
-        Box::new(move |n| n == "report.md" || owned.contains(n)),
+        Box::new(move |n| n == "report.md" || n == REPORT_FILE || owned.contains(n)),
     )?;
     let mut failed = Vec::new();
+    let mut html = Vec::new();
     for (config, name) in &configs {
         let (header, rows) = protocol_rows(config, args.subsets, None, args.threads)?;
         let dir = set.path().join(name);
@@ -659,8 +665,16 @@ fn run_batch(args: BatchArgs) -> Result<()> {
             &rows,
             &format!("{name}/"),
         ));
+        html.push(deformcal::app::protocol_report::dataset_report(
+            &summary, &rows,
+        )?);
     }
     deformcal::app::fsio::write_atomic(&set.path().join("report.md"), report.as_bytes())?;
+    let page = deformcal::app::html_report::protocol::protocol_page(
+        "deformcal evaluation protocol: combined report",
+        &html,
+    );
+    deformcal::app::fsio::write_atomic(&set.path().join(REPORT_FILE), page.as_bytes())?;
     set.commit()?;
     anyhow::ensure!(failed.is_empty(), "{}", failed.join("; "));
     println!(

@@ -237,10 +237,12 @@ fn cli_shards_merge_into_the_unsharded_outputs() {
         "protocol.csv",
         "summary.json",
         "report.md",
+        "report.html",
         "deformations.csv",
         "rmse.svg",
         "intrinsics.svg",
         "mapping.svg",
+        "bend.svg",
         "deformation.svg",
     ] {
         let a = std::fs::read(whole.join(f)).unwrap_or_else(|_| panic!("missing {f}"));
@@ -322,6 +324,11 @@ fn cli_batch_writes_one_combined_report() {
         "{report}"
     );
     assert!(report.contains("(protocol_t4/rmse.svg)"));
+    let html = std::fs::read_to_string(dir.path().join("report.html")).unwrap();
+    assert!(
+        html.contains("id=\"dataset-t4\"") && html.contains("id=\"dataset-reference\""),
+        "the combined report.html lacks a dataset"
+    );
     for name in ["protocol_t4", "protocol_reference"] {
         let csv = std::fs::read_to_string(dir.path().join(name).join("protocol.csv")).unwrap();
         assert_eq!(csv.lines().count(), 1 + 2 * 4, "{name}");

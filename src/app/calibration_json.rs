@@ -269,12 +269,11 @@ impl From<&Calibration> for CalibrationJson {
         let d = &c.dataset;
         let (mut sq, mut n) = (vec![0.0; d.num_frames()], vec![0usize; d.num_frames()]);
         let (mut cam_sq, mut cam_n) = (vec![0.0; d.cameras.len()], vec![0usize; d.cameras.len()]);
-        for (o, r) in d.observations.iter().zip(c.residuals.chunks(2)) {
-            let e = r[0] * r[0] + r[1] * r[1];
-            sq[o.frame] += e;
-            n[o.frame] += 1;
-            cam_sq[o.camera] += e;
-            cam_n[o.camera] += 1;
+        for v in c.view_residuals() {
+            sq[v.frame] += v.sum_sq_px2;
+            n[v.frame] += v.observations;
+            cam_sq[v.camera] += v.sum_sq_px2;
+            cam_n[v.camera] += v.observations;
         }
         let bends = c.method.has_paraboloid();
         let trust = c.trust(c.detector_noise_px);

@@ -71,6 +71,9 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     Ok(())
 }
 
+/// The HTML report of a calibration or a protocol run, in its output directory.
+pub const REPORT_HTML: &str = "report.html";
+
 /// Which entries of an output directory belong to a kind of result set: those are
 /// replaced by the new set, every other entry is kept.
 pub type Owns = Box<dyn Fn(&str) -> bool>;
@@ -85,7 +88,8 @@ pub fn protocol_files() -> Owns {
         matches!(
             name,
             "protocol.csv" | "deformations.csv" | "summary.json" | "report.md"
-        ) || name.ends_with(".svg")
+        ) || name == REPORT_HTML
+            || name.ends_with(".svg")
     })
 }
 

@@ -10,6 +10,7 @@ pub mod detect;
 pub mod exports;
 pub mod fsio;
 pub mod guard;
+pub mod html_report;
 pub mod lint;
 pub mod observations_csv;
 pub mod output;

@@ -1,10 +1,12 @@
-//! The result files of one calibration: `calibration.json`, its exports and
-//! `outliers.csv`, written into a directory (the staging directory of an
+//! The result files of one calibration: `calibration.json`, its exports,
+//! `outliers.csv` and `report.html`, written into a directory (the staging directory of an
 //! [`crate::app::fsio::OutputSet`], which swaps them in as one set).
 use crate::app::calibration_json::CalibrationJson;
 use crate::app::exports;
 use crate::app::fsio::write_atomic;
 use crate::app::guard::Failure;
+use crate::app::html_report;
+use crate::app::lint::FrameFiles;
 use crate::error::{Error, Result};
 use crate::solver::calibrate::Calibration;
 use std::path::{Path, PathBuf};
@@ -26,6 +28,7 @@ pub fn calibration_files() -> crate::app::fsio::Owns {
                 | FAILED_OUTLIERS
                 | "opencv.yaml"
                 | "outliers.csv"
+                | crate::app::fsio::REPORT_HTML
                 | crate::app::exports::KALIBR_FILE
                 | crate::app::exports::COLMAP_FILE
         ) || name.ends_with(".cameramodel")
@@ -37,13 +40,24 @@ pub fn calibration_files() -> crate::app::fsio::Owns {
 
 /// Writes `calibration.json`, its exports (see [`write_models`]; the mrcal models
 /// with the problem as `optimization_inputs` where mrcal can represent it),
-/// `outliers.csv` and each camera's projection-uncertainty map into `dir`
-/// (created if needed); returns the JSON's path.
+/// `outliers.csv`, each camera's projection-uncertainty map and `report.html`
+/// into `dir` (created if needed); returns the JSON's path.
 pub fn write_calibration(dir: &Path, c: &Calibration) -> Result<Written> {
+    write_calibration_labelled(dir, c, &FrameFiles::new())
+}
+
+/// [`write_calibration`], the report naming each frame's image file from `labels`.
+/// The report is written last: it embeds the files it finds beside it.
+pub fn write_calibration_labelled(
+    dir: &Path,
+    c: &Calibration,
+    labels: &FrameFiles,
+) -> Result<Written> {
     let inputs = exports::optimization_inputs(c);
     let written = write_models(dir, &CalibrationJson::from(c), &inputs)?;
     write_atomic(&dir.join("outliers.csv"), &suspects_csv(c)?)?;
     crate::app::uncertainty_plot::write_maps(dir, c)?;
+    html_report::write_calibration_report(dir, c, labels)?;
     Ok(written)
 }
 

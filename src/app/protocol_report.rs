@@ -1,8 +1,12 @@
-//! Protocol outputs: `protocol.csv`, `deformations.csv`, `summary.json`, `report.md`
-//! and its SVG plots. Written from the merged rows alone, so a sharded run and
-//! its merge write exactly what one unsharded run writes.
+//! Protocol outputs: `protocol.csv`, `deformations.csv`, `summary.json`, the
+//! report's tables and SVG plots, written as `report.md` and `report.html`.
+//! Written from the merged rows alone, so a sharded run and its merge write
+//! exactly what one unsharded run writes.
 use crate::app::fsio::write_atomic;
-use crate::app::plots::{self, HLine, Series, PALETTE};
+use crate::app::html_report::page::{Figure, Table};
+use crate::app::html_report::protocol::{protocol_page, DatasetReport};
+use crate::app::html_report::REPORT_FILE;
+use crate::app::plots::{self, Axes, HLine, Series, PALETTE};
 use crate::app::protocol::{CameraRow, Header, Row};
 use crate::error::{Error, Result};
 use crate::model::board::Method;
@@ -231,9 +235,14 @@ fn groups(header: &Header, rows: &[Row], get: impl Fn(&Row) -> Vec<f64>) -> Vec<
 }
 
 /// Per-camera values of one metric across rows, grouped per method.
-fn camera_groups(header: &Header, rows: &[Row], k: usize, get: CameraGetter) -> Vec<Vec<f64>> {
+fn camera_groups(
+    header: &Header,
+    rows: &[Row],
+    k: usize,
+    get: impl Fn(&CameraRow) -> Option<f64>,
+) -> Vec<Vec<f64>> {
     groups(header, rows, |r| {
-        r.cameras.get(k).and_then(get).into_iter().collect()
+        r.cameras.get(k).and_then(&get).into_iter().collect()
     })
 }
 
@@ -254,38 +263,20 @@ fn row_label(h: &Header, m: Method, k: usize) -> String {
     }
 }
 
-/// One line per camera with its pinhole intrinsics.
-fn write_pinholes(s: &mut String, h: &Header, intrinsics: &[crate::model::lens::Intrinsics]) {
-    for (k, i) in intrinsics.iter().enumerate() {
-        let _ = writeln!(
-            s,
-            "- {}: fx {:.2}, fy {:.2}, cx {:.2}, cy {:.2}",
-            h.cameras[k].name,
-            i.fx(),
-            i.fy(),
-            i.cx(),
-            i.cy()
-        );
-    }
-}
-
-/// The report's opening: the dataset, the protocol's sizes, the reference and the truth.
-fn write_intro(s: &mut String, h: &Header) {
-    let _ = writeln!(s, "## Dataset `{}`\n", h.dataset);
+/// The report's opening paragraphs: the dataset, the protocol's sizes, the reference.
+fn intro(h: &Header) -> Vec<String> {
     let cams: Vec<String> = h
         .cameras
         .iter()
         .map(|c| format!("{} {}×{}", c.name, c.width, c.height))
         .collect();
-    let _ = writeln!(
-        s,
-        "{} subsets × {} images drawn from {} images (seed {}); board {} × {} corners, {} m; camera(s) {}.\n",
+    let mut out = vec![format!(
+        "{} subsets × {} images drawn from {} images (seed {}); board {} × {} corners, {} m; camera(s) {}.",
         h.subsets, h.images_per_subset, h.dataset_images, h.seed, h.target.rows, h.target.cols, h.target.spacing, cams.join(", ")
-    );
+    )];
     if let Some(r) = &h.reference {
-        let _ = writeln!(
-            s,
-            "Reference calibration: `static` on {} images ({} observations), RMSE {:.4} px{}.",
+        out.push(format!(
+            "Reference calibration: `static` on {} images ({} observations), RMSE {:.4} px{}; its intrinsics are in the intrinsics table.",
             r.images,
             r.observations,
             r.rmse_px,
@@ -294,99 +285,212 @@ fn write_intro(s: &mut String, h: &Header) {
             } else {
                 " (did not converge)"
             }
-        );
-        write_pinholes(s, h, &r.intrinsics);
-        s.push('\n');
+        ));
     }
-    if let Some(t) = &h.truth {
-        let _ = writeln!(s, "Ground truth (synthetic):");
-        write_pinholes(s, h, t);
-        s.push('\n');
+    if h.truth.is_some() {
+        out.push("Synthetic data: the true intrinsics are in the intrinsics table.".into());
+    }
+    out
+}
+
+/// A figure of the report.
+fn figure(file: &str, alt: &str, caption: &str) -> Figure {
+    Figure {
+        file: file.into(),
+        alt: alt.into(),
+        caption: caption.into(),
     }
 }
 
 /// The train and test error table (paper Fig. 3a).
-fn write_rmse_table(s: &mut String, summary: &Summary, prefix: &str) {
+fn rmse_table(summary: &Summary) -> Table {
     let h = &summary.header;
-    let _ = writeln!(s, "### Train and test error (paper Fig. 3a)\n");
-    let test_heads: Vec<String> = h
-        .cameras
+    let mut head: Vec<String> = vec![
+        "method".into(),
+        "calibrations (failed)".into(),
+        "train RMSE (px)".into(),
+    ];
+    head.extend(h.cameras.iter().map(|c| {
+        if h.cameras.len() > 1 {
+            format!("test RMSE {} (px)", c.name)
+        } else {
+            "test RMSE (px)".into()
+        }
+    }));
+    let rows = h
+        .methods
         .iter()
-        .map(|c| {
-            if h.cameras.len() > 1 {
-                format!("test RMSE {} (px)", c.name)
-            } else {
-                "test RMSE (px)".into()
-            }
+        .map(|&m| {
+            let ms = &summary.methods[m.name()];
+            let mut row = vec![
+                m.to_string(),
+                format!("{} ({})", ms.calibrations, ms.failed),
+                pm(stat(summary, m, "rmse_px"), 1.0, 4),
+            ];
+            row.extend(
+                (0..h.cameras.len())
+                    .map(|k| pm(stat(summary, m, &camera_key(h, k, "test_rmse_px")), 1.0, 4)),
+            );
+            row
         })
         .collect();
-    let _ = writeln!(
-        s,
-        "| method | calibrations (failed) | train RMSE (px) | {} |\n|---|---|---|{}",
-        test_heads.join(" | "),
-        "---|".repeat(h.cameras.len())
-    );
-    for &m in &h.methods {
-        let ms = &summary.methods[m.name()];
-        let tests: Vec<String> = (0..h.cameras.len())
-            .map(|k| pm(stat(summary, m, &camera_key(h, k, "test_rmse_px")), 1.0, 4))
-            .collect();
-        let _ = writeln!(
-            s,
-            "| {m} | {} ({}) | {} | {} |",
-            ms.calibrations,
-            ms.failed,
-            pm(stat(summary, m, "rmse_px"), 1.0, 4),
-            tests.join(" | ")
-        );
+    Table {
+        title: "Train and test error (paper Fig. 3a)".into(),
+        head,
+        rows,
+        figures: vec![figure(
+            "rmse.svg",
+            "train and test RMSE",
+            "One dot per subset; bars: mean ± standard deviation. Train: the RMSE √(Σ‖u − p‖² / N) of the \
+             subset's own observations. Test: the RMSE on the reference set with the subset's intrinsics held \
+             and only the board poses fitted.",
+        )],
     }
-    let _ = writeln!(s, "\n![train and test RMSE]({prefix}rmse.svg)\n");
+}
+
+/// Decimals of an intrinsic parameter: pixels to 2, coefficients to 5.
+fn param_digits(model: crate::model::lens::LensModel, name: &str) -> usize {
+    if model.param_index(name).is_some_and(|i| i < 4) {
+        2
+    } else {
+        5
+    }
+}
+
+/// The unit of an intrinsic parameter, for headers and axes.
+fn param_unit(model: crate::model::lens::LensModel, name: &str) -> &'static str {
+    if model.param_index(name).is_some_and(|i| i < 4) {
+        "px"
+    } else {
+        "unitless"
+    }
+}
+
+/// The intrinsics of camera k: every parameter per method, with the reference and
+/// the truth (paper Fig. 4a).
+fn intrinsics_table(summary: &Summary, k: usize) -> Table {
+    let h = &summary.header;
+    let cam = &h.cameras[k];
+    let names = cam.model.param_names();
+    let mut head = vec!["method".to_string()];
+    head.extend(
+        names
+            .iter()
+            .map(|n| format!("{n} ({})", param_unit(cam.model, n))),
+    );
+    let mut rows: Vec<Vec<String>> = h
+        .methods
+        .iter()
+        .map(|&m| {
+            let mut row = vec![m.to_string()];
+            row.extend(names.iter().map(|n| {
+                pm(
+                    stat(summary, m, &camera_key(h, k, n)),
+                    1.0,
+                    param_digits(cam.model, n),
+                )
+            }));
+            row
+        })
+        .collect();
+    let fixed = |label: &str, i: &crate::model::lens::Intrinsics| {
+        let mut row = vec![label.to_string()];
+        row.extend(names.iter().map(|n| {
+            i.get(n)
+                .map(|v| format!("{v:.*}", param_digits(cam.model, n)))
+                .unwrap_or_else(|| "–".into())
+        }));
+        row
+    };
+    if let Some(i) = h.reference.as_ref().and_then(|r| r.intrinsics.get(k)) {
+        rows.push(fixed("reference", i));
+    }
+    if let Some(i) = h.truth.as_ref().and_then(|t| t.get(k)) {
+        rows.push(fixed("truth", i));
+    }
+    let title = if h.cameras.len() > 1 {
+        format!("Intrinsics of {} (paper Fig. 4a)", cam.name)
+    } else {
+        "Intrinsics (paper Fig. 4a)".into()
+    };
+    Table {
+        title,
+        head,
+        rows,
+        figures: Vec::new(),
+    }
+}
+
+/// Every camera's intrinsics tables, the last one with the intrinsics figure.
+fn intrinsics_tables(summary: &Summary) -> Vec<Table> {
+    let mut tables: Vec<Table> = (0..summary.header.cameras.len())
+        .map(|k| intrinsics_table(summary, k))
+        .collect();
+    if let Some(last) = tables.last_mut() {
+        last.figures.push(figure(
+            "intrinsics.svg",
+            "intrinsics",
+            "Every intrinsic parameter of every camera, one panel each: one dot per subset, bars mean ± \
+             standard deviation; lines: the reference calibration and, for synthetic data, the truth. \
+             fx, fy, cx, cy in pixels; distortion coefficients unitless.",
+        ));
+    }
+    tables
 }
 
 /// Rows of a per-camera × method table of `metrics`, with `digits` decimals.
-fn write_camera_rows(s: &mut String, summary: &Summary, metrics: &[&str], digits: usize) {
+fn camera_rows(summary: &Summary, metrics: &[&str], digits: usize) -> Vec<Vec<String>> {
     let h = &summary.header;
+    let mut rows = Vec::new();
     for k in 0..h.cameras.len() {
         for &m in &h.methods {
-            let v: Vec<String> = metrics
-                .iter()
-                .map(|n| pm(stat(summary, m, &camera_key(h, k, n)), 1.0, digits))
-                .collect();
-            let _ = writeln!(s, "| {} | {} |", row_label(h, m, k), v.join(" | "));
+            let mut row = vec![row_label(h, m, k)];
+            row.extend(
+                metrics
+                    .iter()
+                    .map(|n| pm(stat(summary, m, &camera_key(h, k, n)), 1.0, digits)),
+            );
+            rows.push(row);
         }
+    }
+    rows
+}
+
+/// The mapping error table (paper Fig. 4b).
+fn mapping_table(summary: &Summary) -> Table {
+    Table {
+        title: "Mapping error (paper Fig. 4b)".into(),
+        head: [
+            "method",
+            "to reference (px)",
+            "to reference, rotation removed (px)",
+            "to truth (px)",
+            "to truth, rotation removed (px)",
+        ]
+        .map(String::from)
+        .to_vec(),
+        rows: camera_rows(
+            summary,
+            &[
+                "mapping_error_px",
+                "mapping_error_rot_px",
+                "truth_mapping_error_px",
+                "truth_mapping_error_rot_px",
+            ],
+            3,
+        ),
+        figures: vec![figure(
+            "mapping.svg",
+            "mapping error",
+            "Mapping error: a 20 px grid over the image unprojected with the subset's intrinsics and \
+             projected with the reference's (or the truth's); the RMSE of the pixel differences. \
+             \"Rotation removed\": after the best virtual camera rotation, which is no calibration error.",
+        )],
     }
 }
 
-/// The intrinsics (paper Fig. 4a) and mapping error (paper Fig. 4b) tables.
-fn write_intrinsics_and_mapping(s: &mut String, summary: &Summary, prefix: &str) {
-    let _ = writeln!(s, "### Intrinsics (paper Fig. 4a)\n");
-    let _ = writeln!(
-        s,
-        "| method | fx (px) | fy (px) | cx (px) | cy (px) |\n|---|---|---|---|---|"
-    );
-    write_camera_rows(s, summary, &["fx", "fy", "cx", "cy"], 2);
-    let _ = writeln!(s, "\n![fx and cx]({prefix}intrinsics.svg)\n");
-    let _ = writeln!(s, "### Mapping error (paper Fig. 4b)\n");
-    let _ = writeln!(
-        s,
-        "| method | to reference (px) | to reference, rotation removed (px) | to truth (px) | to truth, rotation removed (px) |\n|---|---|---|---|---|"
-    );
-    write_camera_rows(
-        s,
-        summary,
-        &[
-            "mapping_error_px",
-            "mapping_error_rot_px",
-            "truth_mapping_error_px",
-            "truth_mapping_error_rot_px",
-        ],
-        3,
-    );
-    let _ = writeln!(s, "\n![mapping error]({prefix}mapping.svg)\n");
-}
-
-/// The out-of-plane deformation table (paper Table S2) and Fig. 1's plot, if any method bends.
-fn write_bending(s: &mut String, summary: &Summary, rows: &[Row], prefix: &str) {
+/// The out-of-plane deformation table (paper Table S2) with its figures, if any method bends.
+fn bending_table(summary: &Summary, rows: &[Row]) -> Option<Table> {
     let bending: Vec<Method> = summary
         .header
         .methods
@@ -395,27 +499,39 @@ fn write_bending(s: &mut String, summary: &Summary, rows: &[Row], prefix: &str) 
         .filter(|m| m.has_paraboloid())
         .collect();
     if bending.is_empty() {
-        return;
+        return None;
     }
-    let _ = writeln!(
-        s,
-        "### Maximum out-of-plane deformation per image (paper Table S2)\n"
-    );
-    let _ = writeln!(s, "| method | max out-of-plane (mm) |\n|---|---|");
-    for m in bending {
-        let _ = writeln!(
-            s,
-            "| {m} | {} |",
-            pm(stat(summary, m, "max_out_of_plane_m"), 1e3, 3)
-        );
-    }
+    let table_rows = bending
+        .iter()
+        .map(|&m| {
+            vec![
+                m.to_string(),
+                pm(stat(summary, m, "max_out_of_plane_m"), 1e3, 3),
+            ]
+        })
+        .collect();
+    let mut figures = vec![figure(
+        "bend.svg",
+        "largest bend per image",
+        "The largest out-of-plane deflection of every image of every subset, max over the corners of \
+         |a·x² + b·y² + c·xy|, in mm; bars: mean ± standard deviation.",
+    )];
     if let Some((r, j)) = most_bent(rows) {
-        let _ = writeln!(
-            s,
-            "\n![deformation of one image]({prefix}deformation.svg)\n\nThe estimated bend of frame {} in subset {} (`{}`), the most bent image of the first subset (paper Fig. 1).\n",
-            r.frames[j], r.subset, r.method
-        );
+        figures.push(figure(
+            "deformation.svg",
+            "deformation of one image",
+            &format!(
+                "The estimated bend Δz of frame {} in subset {} (`{}`), the most bent image of the first subset (paper Fig. 1).",
+                r.frames[j], r.subset, r.method
+            ),
+        ));
     }
+    Some(Table {
+        title: "Maximum out-of-plane deformation per image (paper Table S2)".into(),
+        head: vec!["method".into(), "max out-of-plane (mm)".into()],
+        rows: table_rows,
+        figures,
+    })
 }
 
 /// RMS of the finite values (`None` without any).
@@ -503,32 +619,76 @@ fn write_uncertainty(s: &mut String, summary: &Summary, rows: &[Row]) {
 }
 
 /// The failed calibrations and their reasons, if any.
-fn write_failed(s: &mut String, rows: &[Row]) {
-    let failed: Vec<&Row> = rows.iter().filter(|r| !r.ok()).collect();
-    if failed.is_empty() {
-        return;
-    }
+fn failed_table(rows: &[Row]) -> Option<Table> {
+    let failed: Vec<Vec<String>> = rows
+        .iter()
+        .filter(|r| !r.ok())
+        .map(|r| {
+            vec![
+                r.subset.to_string(),
+                r.method.to_string(),
+                r.error.as_deref().unwrap_or("").replace('|', "/"),
+            ]
+        })
+        .collect();
+    (!failed.is_empty()).then(|| Table {
+        title: "Failed calibrations".into(),
+        head: vec!["subset".into(), "method".into(), "reason".into()],
+        rows: failed,
+        figures: Vec::new(),
+    })
+}
+
+/// Every table of one dataset's report, in order.
+pub fn report_tables(summary: &Summary, rows: &[Row]) -> Vec<Table> {
+    let mut tables = vec![rmse_table(summary)];
+    tables.extend(intrinsics_tables(summary));
+    tables.push(mapping_table(summary));
+    tables.extend(bending_table(summary, rows));
+    tables.extend(failed_table(rows));
+    tables
+}
+
+/// One table as markdown, its figures linked with `prefix` before their file names.
+fn table_markdown(s: &mut String, t: &Table, prefix: &str) {
+    let _ = writeln!(s, "### {}\n", t.title);
     let _ = writeln!(
         s,
-        "### Failed calibrations\n\n| subset | method | reason |\n|---|---|---|"
+        "| {} |\n|{}",
+        t.head.join(" | "),
+        "---|".repeat(t.head.len())
     );
-    for r in failed {
-        let reason = r.error.as_deref().unwrap_or("").replace('|', "/");
-        let _ = writeln!(s, "| {} | {} | {reason} |", r.subset, r.method);
+    for r in &t.rows {
+        let _ = writeln!(s, "| {} |", r.join(" | "));
     }
     s.push('\n');
+    for f in &t.figures {
+        let _ = writeln!(s, "![{}]({prefix}{})\n\n{}\n", f.alt, f.file, f.caption);
+    }
 }
 
 /// The report's markdown for one dataset; `prefix` is prepended to plot links.
 pub fn report_markdown(summary: &Summary, rows: &[Row], prefix: &str) -> String {
     let mut s = String::new();
-    write_intro(&mut s, &summary.header);
-    write_rmse_table(&mut s, summary, prefix);
-    write_intrinsics_and_mapping(&mut s, summary, prefix);
-    write_bending(&mut s, summary, rows, prefix);
+    let _ = writeln!(s, "## Dataset `{}`\n", summary.header.dataset);
+    for p in intro(&summary.header) {
+        let _ = writeln!(s, "{p}\n");
+    }
+    for t in report_tables(summary, rows) {
+        table_markdown(&mut s, &t, prefix);
+    }
     write_uncertainty(&mut s, summary, rows);
-    write_failed(&mut s, rows);
     s
+}
+
+/// One dataset's report for the HTML page: its tables and its figures drawn.
+pub fn dataset_report(summary: &Summary, rows: &[Row]) -> Result<DatasetReport> {
+    Ok(DatasetReport {
+        name: summary.header.dataset.clone(),
+        intro: intro(&summary.header),
+        tables: report_tables(summary, rows),
+        figures: plots(summary, rows)?.into_iter().collect(),
+    })
 }
 
 /// The row and image whose bend the Fig. 1 plot shows: `full` (else `dynamic`) of the
@@ -559,8 +719,11 @@ fn colour(i: usize) -> plotters::style::RGBColor {
     PALETTE[i % PALETTE.len()]
 }
 
+/// The x axis of every strip chart.
+const METHOD_AXIS: &str = "method";
+
 /// `rmse.svg`: train RMSE and each camera's test RMSE per method.
-fn plot_rmse(dir: &Path, h: &Header, cats: &[String], rows: &[Row]) -> Result<()> {
+fn plot_rmse(h: &Header, cats: &[String], rows: &[Row]) -> Result<String> {
     // Series names must outlive the charts.
     let test_names: Vec<String> = (0..h.cameras.len()).map(|k| named(h, "test", k)).collect();
     let mut rmse = vec![Series {
@@ -576,66 +739,82 @@ fn plot_rmse(dir: &Path, h: &Header, cats: &[String], rows: &[Row]) -> Result<()
         });
     }
     plots::strip_chart_svg(
-        &dir.join("rmse.svg"),
         &format!("{}: train and test RMSE", h.dataset),
-        "RMSE (px)",
+        Axes {
+            x: METHOD_AXIS,
+            y: "RMSE (px) = √(Σ‖u − p‖² / N)",
+        },
         cats,
         &rmse,
         &[],
     )
 }
 
-/// `intrinsics.svg`: fx and cx of camera 0, with the reference and the truth.
-fn plot_intrinsics(dir: &Path, h: &Header, cats: &[String], rows: &[Row]) -> Result<()> {
-    let lines = |f: fn(&crate::model::lens::Intrinsics) -> f64| {
-        let mut lines = Vec::new();
-        if let Some(r) = &h.reference {
-            lines.push(HLine {
-                value: f(&r.intrinsics[0]),
-                name: "reference",
-                color: BLACK_RGB,
-            });
+/// The reference and truth lines of one intrinsic parameter of camera k.
+fn intrinsic_lines<'a>(h: &Header, k: usize, name: &str) -> Vec<HLine<'a>> {
+    let mut lines = Vec::new();
+    if let Some(v) = h
+        .reference
+        .as_ref()
+        .and_then(|r| r.intrinsics.get(k))
+        .and_then(|i| i.get(name))
+    {
+        lines.push(HLine {
+            value: v,
+            name: "reference",
+            color: BLACK_RGB,
+        });
+    }
+    if let Some(v) = h
+        .truth
+        .as_ref()
+        .and_then(|t| t.get(k))
+        .and_then(|i| i.get(name))
+    {
+        lines.push(HLine {
+            value: v,
+            name: "truth",
+            color: PALETTE[3],
+        });
+    }
+    lines
+}
+
+/// `intrinsics.svg`: every intrinsic parameter of every camera, one panel each,
+/// with the reference and the truth.
+fn plot_intrinsics(h: &Header, cats: &[String], rows: &[Row]) -> Result<String> {
+    let mut keys: Vec<(usize, &'static str, String, String)> = Vec::new();
+    for (k, cam) in h.cameras.iter().enumerate() {
+        for name in cam.model.param_names() {
+            let title = named(h, name, k);
+            let axis = format!("{name} ({})", param_unit(cam.model, name));
+            keys.push((k, name, title, axis));
         }
-        if let Some(t) = &h.truth {
-            lines.push(HLine {
-                value: f(&t[0]),
-                name: "truth",
-                color: PALETTE[3],
-            });
-        }
-        lines
-    };
-    let (fx_name, cx_name) = (named(h, "fx", 0), named(h, "cx", 0));
-    plots::panels_svg(
-        &dir.join("intrinsics.svg"),
-        &[
+    }
+    let panels: Vec<plots::Panel> = keys
+        .iter()
+        .map(|(k, name, title, axis)| {
+            let series = vec![Series {
+                name: "one subset (bars: mean ± std)",
+                color: colour(0),
+                groups: camera_groups(h, rows, *k, |c| c.intrinsics.get(name)),
+            }];
             (
-                "fx",
-                "fx (px)",
-                vec![Series {
-                    name: &fx_name,
-                    color: colour(0),
-                    groups: camera_groups(h, rows, 0, |c| Some(c.intrinsics.fx())),
-                }],
-                lines(|k| k.fx()),
-            ),
-            (
-                "cx",
-                "cx (px)",
-                vec![Series {
-                    name: &cx_name,
-                    color: colour(2),
-                    groups: camera_groups(h, rows, 0, |c| Some(c.intrinsics.cx())),
-                }],
-                lines(|k| k.cx()),
-            ),
-        ],
-        cats,
-    )
+                title.clone(),
+                Axes {
+                    x: METHOD_AXIS,
+                    y: axis,
+                },
+                series,
+                intrinsic_lines(h, *k, name),
+            )
+        })
+        .collect();
+    plots::panels_svg("intrinsics.svg", &panels, cats, 3)
 }
 
 /// `mapping.svg`: each camera's mapping error to the reference and to the truth.
-fn plot_mapping(dir: &Path, h: &Header, cats: &[String], rows: &[Row]) -> Result<()> {
+fn plot_mapping(h: &Header, cats: &[String], rows: &[Row]) -> Result<String> {
     let mut names = Vec::new();
     for k in 0..h.cameras.len() {
         if h.reference.is_some() {
@@ -662,25 +841,73 @@ fn plot_mapping(dir: &Path, h: &Header, cats: &[String], rows: &[Row]) -> Result
         })
         .collect();
     plots::strip_chart_svg(
-        &dir.join("mapping.svg"),
         &format!("{}: mapping error", h.dataset),
-        "mapping error (px)",
+        Axes {
+            x: METHOD_AXIS,
+            y: "mapping error (px): RMS over a 20 px grid",
+        },
         cats,
         &mapping,
         &[],
     )
 }
 
-/// Writes the SVG plots of one dataset into `dir`.
-pub fn write_plots(dir: &Path, summary: &Summary, rows: &[Row]) -> Result<()> {
+/// `bend.svg`: every image's largest bend per method that estimates one.
+fn plot_bend(h: &Header, rows: &[Row]) -> Result<Option<String>> {
+    let methods: Vec<Method> = h
+        .methods
+        .iter()
+        .copied()
+        .filter(|m| m.has_paraboloid())
+        .collect();
+    if methods.is_empty() {
+        return Ok(None);
+    }
+    let cats: Vec<String> = methods.iter().map(|m| m.name().to_string()).collect();
+    let groups: Vec<Vec<f64>> = methods
+        .iter()
+        .map(|&m| {
+            rows.iter()
+                .filter(|r| r.method == m && r.ok())
+                .flat_map(|r| r.max_out_of_plane_m.iter().map(|v| v * 1e3))
+                .collect()
+        })
+        .collect();
+    let series = [Series {
+        name: "one image of a subset (bars: mean ± std)",
+        color: colour(0),
+        groups,
+    }];
+    plots::strip_chart_svg(
+        &format!("{}: largest bend per image", h.dataset),
+        Axes {
+            x: METHOD_AXIS,
+            y: "max |Δz| over the corners (mm)",
+        },
+        &cats,
+        &series,
+        &[],
+    )
+    .map(Some)
+}
+
+/// Every SVG plot of one dataset, by file name.
+pub fn plots(summary: &Summary, rows: &[Row]) -> Result<Vec<(String, String)>> {
     let h = &summary.header;
     let cats: Vec<String> = h.methods.iter().map(|m| m.name().to_string()).collect();
-    plot_rmse(dir, h, &cats, rows)?;
-    plot_intrinsics(dir, h, &cats, rows)?;
-    plot_mapping(dir, h, &cats, rows)?;
+    let mut out = vec![
+        ("rmse.svg".to_string(), plot_rmse(h, &cats, rows)?),
+        (
+            "intrinsics.svg".to_string(),
+            plot_intrinsics(h, &cats, rows)?,
+        ),
+        ("mapping.svg".to_string(), plot_mapping(h, &cats, rows)?),
+    ];
+    if let Some(svg) = plot_bend(h, rows)? {
+        out.push(("bend.svg".to_string(), svg));
+    }
     if let Some((r, j)) = most_bent(rows) {
-        plots::deformation_svg(
-            &dir.join("deformation.svg"),
+        let svg = plots::deformation_svg(
             &format!(
                 "{}: frame {} of subset {} ({}), max |Δz| {:.2} mm",
                 h.dataset,
@@ -692,25 +919,32 @@ pub fn write_plots(dir: &Path, summary: &Summary, rows: &[Row]) -> Result<()> {
             &h.target,
             &r.deformations[j],
         )?;
+        out.push(("deformation.svg".to_string(), svg));
     }
-    Ok(())
+    Ok(out)
 }
 
 const BLACK_RGB: plotters::style::RGBColor = plotters::style::RGBColor(0, 0, 0);
 
-/// Writes every protocol output of one dataset into `dir`.
+/// Writes every protocol output of one dataset into `dir`: the CSV files, the
+/// summary, the plots, `report.md` and `report.html`.
 pub fn write_outputs(dir: &Path, header: &Header, rows: &[Row]) -> Result<Summary> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let summary = summarise(header, rows);
-    write_plots(dir, &summary, rows)?;
+    let report = dataset_report(&summary, rows)?;
+    for (file, svg) in &report.figures {
+        write_atomic(&dir.join(file), svg.as_bytes())?;
+    }
     write_atomic(&dir.join("protocol.csv"), &protocol_csv(header, rows)?)?;
     write_atomic(&dir.join("deformations.csv"), &deformations_csv(rows))?;
     let json = serde_json::to_string_pretty(&summary).expect("summary serialises");
     write_atomic(&dir.join("summary.json"), json.as_bytes())?;
-    let report = format!(
+    let markdown = format!(
         "# deformcal evaluation protocol\n\n{}",
         report_markdown(&summary, rows, "")
     );
-    write_atomic(&dir.join("report.md"), report.as_bytes())?;
+    write_atomic(&dir.join("report.md"), markdown.as_bytes())?;
+    let html = protocol_page("deformcal evaluation protocol", &[report]);
+    write_atomic(&dir.join(REPORT_FILE), html.as_bytes())?;
     Ok(summary)
 }

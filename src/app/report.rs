@@ -1,6 +1,7 @@
 //! The short human summary printed after a calibration.
 use crate::model::board::Method;
 use crate::model::selection::Selection;
+use crate::model::trust::Trust;
 use crate::solver::calibrate::Calibration;
 use std::fmt::Write;
 
@@ -56,7 +57,23 @@ fn write_trust(s: &mut String, c: &Calibration) {
     } else {
         "estimated from neighbouring corners"
     };
-    let verdict = if t.bias_ratio <= 0.1 {
+    let _ = writeln!(
+        s,
+        "  noise {:.3} px ({source}); bias ratio {:.2}: {}; G-AIC {:.1} with {} parameters",
+        t.noise_px,
+        t.bias_ratio,
+        trust_verdict(c, &t),
+        t.g_aic,
+        t.parameters
+    );
+}
+
+/// Whether the bias ratio above [`BIAS_RATIO_OK`] leaves room for doubt.
+pub const BIAS_RATIO_OK: f64 = 0.1;
+
+/// What the bias ratio says of a calibration, and what to do about it.
+pub fn trust_verdict(c: &Calibration, t: &Trust) -> String {
+    if t.bias_ratio <= BIAS_RATIO_OK {
         "the noise explains the residual".to_string()
     } else if c.method.has_paraboloid() {
         format!(
@@ -68,12 +85,7 @@ fn write_trust(s: &mut String, c: &Calibration) {
             "{:.0}% of the residual is more than noise: the board may bend; compare with `dynamic` (lower G-AIC is better)",
             100.0 * t.bias_ratio
         )
-    };
-    let _ = writeln!(
-        s,
-        "  noise {:.3} px ({source}); bias ratio {:.2}: {verdict}; G-AIC {:.1} with {} parameters",
-        t.noise_px, t.bias_ratio, t.g_aic, t.parameters
-    );
+    }
 }
 
 /// `auto`'s table of candidates and its verdict.

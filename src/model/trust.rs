@@ -55,6 +55,13 @@ pub fn noise_from_neighbours(dataset: &Dataset, residuals: &[f64]) -> Option<f64
     (triples > 0).then(|| (sum / (12.0 * triples as f64)).sqrt())
 }
 
+/// E[rmse²] = 2σ̂²(1 − p/N) of a model without systematic error: the squared
+/// RMSE (per point, pixels²) the noise alone leaves with `parameters` free
+/// parameters and `residuals` residuals (two per observation).
+pub fn expected_rmse2(noise_px: f64, parameters: usize, residuals: usize) -> f64 {
+    2.0 * noise_px * noise_px * (1.0 - parameters as f64 / residuals.max(1) as f64)
+}
+
 /// The figures for residuals (u, v per observation) of a fit with `parameters`
 /// free parameters and noise σ̂.
 pub fn assess(residuals: &[f64], parameters: usize, noise_px: f64, source: &'static str) -> Trust {
@@ -62,7 +69,7 @@ pub fn assess(residuals: &[f64], parameters: usize, noise_px: f64, source: &'sta
     let sum_sq: f64 = residuals.iter().map(|r| r * r).sum();
     // rmse per point (SPEC §3): Σ‖u − p‖² over N/2 points.
     let rmse2 = sum_sq / (n as f64 / 2.0);
-    let expected = 2.0 * noise_px * noise_px * (1.0 - parameters as f64 / n as f64);
+    let expected = expected_rmse2(noise_px, parameters, n);
     let bias_ratio = if rmse2 > 0.0 {
         ((rmse2 - expected) / rmse2).max(0.0)
     } else {

@@ -5,6 +5,7 @@ mod bridge;
 pub mod calibrate;
 pub mod covariance;
 pub mod problem;
+pub mod residuals;
 pub mod robust;
 pub mod select;
 mod trust;

@@ -52,7 +52,7 @@ fn unrepresentable(format: &str, c: &CameraJson) -> String {
     )
 }
 
-/// A camera name made safe for a file name: path separators replaced.
+/// A camera name made safe for a file name: path separators and NUL become `_`.
 pub fn file_stem(camera: &str) -> String {
     camera
         .chars()

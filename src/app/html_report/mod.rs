@@ -1,0 +1,53 @@
+//! The HTML reports: `report.html` beside every `calibration.json` and beside every
+//! protocol's `report.md`. Each is one self-contained file (inline SVG figures,
+//! inline CSS, no script, font or network resource), so it opens anywhere.
+//!
+//! - `page`: the HTML building blocks (escaping, page shell, tables, figures).
+//! - `fields` and `figures`: the numbers behind the calibration figures, and the
+//!   figures themselves (plotters; shared primitives in `app::plots`).
+//! - `calibration`: what the calibration page shows, section by section.
+//! - `protocol`: the protocol page, from the tables `app::protocol_report` builds.
+pub mod calibration;
+pub mod fields;
+pub mod figures;
+pub mod page;
+pub mod protocol;
+
+use crate::app::fsio::{read_limited, write_atomic};
+use crate::app::lint::FrameFiles as FrameLabels;
+use crate::error::Result;
+use crate::solver::calibrate::Calibration;
+use std::path::Path;
+
+/// The report's file name, in every output directory that has one.
+pub use crate::app::fsio::REPORT_HTML as REPORT_FILE;
+
+/// Largest uncertainty map embedded; a larger file is left out of the report.
+const MAX_EMBEDDED_BYTES: u64 = 16 << 20;
+
+/// The file name of camera `camera`'s projection-uncertainty map, which the report
+/// embeds when it is in the output directory before the report is written.
+pub fn uncertainty_file(camera: &str) -> String {
+    format!("uncertainty_{}.svg", crate::app::exports::file_stem(camera))
+}
+
+/// Camera `camera`'s uncertainty map from `dir`, if one was written there.
+pub fn read_uncertainty(dir: &Path, camera: &str) -> Option<Vec<u8>> {
+    let path = dir.join(uncertainty_file(camera));
+    path.is_file()
+        .then(|| read_limited(&path, MAX_EMBEDDED_BYTES).ok())
+        .flatten()
+}
+
+/// Writes `report.html` of a calibration into `dir` (the staging directory of the
+/// result set), embedding each camera's uncertainty map found there.
+pub fn write_calibration_report(dir: &Path, c: &Calibration, labels: &FrameLabels) -> Result<()> {
+    let maps: Vec<Option<Vec<u8>>> = c
+        .dataset
+        .cameras
+        .iter()
+        .map(|cam| read_uncertainty(dir, &cam.name))
+        .collect();
+    let html = calibration::calibration_page(c, labels, &maps)?;
+    write_atomic(&dir.join(REPORT_FILE), html.as_bytes())
+}
