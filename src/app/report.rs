@@ -150,17 +150,22 @@ pub fn verdict(sel: &Selection, c: &Calibration) -> String {
             1e3 * worst
         ));
     }
+    // As `compare` does: the larger of the plain and the rotation-compensated
+    // shift relative to the expected mapping error of the same kind.
     let expected = c.uncertainty().ok().map(|u| {
-        u.iter()
-            .map(|x| x.expected_mapping_error_px)
-            .fold(0.0, f64::max)
+        u.iter().fold((0.0f64, 0.0f64), |m, x| {
+            (
+                m.0.max(x.expected_mapping_error_px),
+                m.1.max(x.expected_mapping_error_rot_px),
+            )
+        })
     });
     parts.push(match expected {
-        Some(e) if e > 0.0 => format!(
-            "modelling it moves the projection by {:.2} px, {:.0}× the calibration's uncertainty ({:.3} px)",
+        Some((e, e_rot)) if e > 0.0 && e_rot > 0.0 => format!(
+            "modelling it moves the projection by {:.2} px ({:.3} px with the rotation removed), {:.1}× the calibration's uncertainty",
             sel.projection_shift_px,
-            sel.projection_shift_px / e,
-            e
+            sel.projection_shift_rot_px,
+            (sel.projection_shift_px / e).max(sel.projection_shift_rot_px / e_rot)
         ),
         _ => format!(
             "modelling it moves the projection by {:.2} px",

@@ -144,6 +144,9 @@ pub struct Selection {
     /// Largest mapping error between `standard`'s and the chosen intrinsics over
     /// the cameras, px: how far modelling the board moves the projection.
     pub projection_shift_px: f64,
+    /// The same with the virtual rotation profiled out (SPEC §3), px.
+    #[serde(default)]
+    pub projection_shift_rot_px: f64,
 }
 
 /// Paired standard error of `mse(a) − mse(b)`, in px², over the frames both saw.

@@ -504,6 +504,14 @@ fn solve_method(
 
 /// Runs the whole pipeline on one dataset.
 pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {
+    let mut c = fit(dataset, request)?;
+    c.covariance = crate::solver::covariance::unit_covariance(&c.problem(), &c.state, &c.settings);
+    Ok(c)
+}
+
+/// [`calibrate`] without the covariance, for fits only their parameters matter
+/// of (`auto`'s cross-validation folds).
+pub(crate) fn fit(dataset: &Dataset, request: &Request) -> Result<Calibration> {
     let start = Instant::now();
     let mut warnings = Vec::new();
     let dataset = robust::drop_outside_image(dataset, &mut warnings)?;
@@ -547,7 +555,7 @@ pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {
             stages.last().map(|s| s.message.as_str()).unwrap_or("")
         ));
     }
-    let mut c = Calibration {
+    Ok(Calibration {
         method: request.method,
         rmse_px: rmse(&residuals),
         residuals,
@@ -565,10 +573,8 @@ pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {
         rejected,
         detector_noise_px: None,
         selection: None,
-        covariance: Err(UncertaintyError::Jacobian("not computed yet".into())),
-    };
-    c.covariance = crate::solver::covariance::unit_covariance(&c.problem(), &c.state, &c.settings);
-    Ok(c)
+        covariance: Err(UncertaintyError::Jacobian("not computed".into())),
+    })
 }
 
 /// What [`finish_robustly`] hands back: the data kept, their residuals, the frozen

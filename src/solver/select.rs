@@ -8,10 +8,10 @@ use crate::error::{Error, Result};
 use crate::model::board::{Method, Paraboloid};
 use crate::model::dataset::Dataset;
 use crate::model::lens::Intrinsics;
-use crate::model::metrics::mapping_error;
+use crate::model::metrics::{mapping_error, mapping_error_rot};
 use crate::model::selection::{self, AutoSettings, Candidate, HeldOut, Selection};
 use crate::model::state::State;
-use crate::solver::calibrate::{calibrate, Calibration, Request, MIN_IMAGES};
+use crate::solver::calibrate::{calibrate, fit, Calibration, Request, MIN_IMAGES};
 use crate::solver::problem::{Hold, Loss, Problem, SolverSettings};
 use rayon::prelude::*;
 
@@ -103,7 +103,7 @@ pub fn calibrate_auto(
         .find(|(m, _)| *m == chosen)
         .expect("the chosen method is a candidate");
     let mut result = result?;
-    let shift = projection_shift(&standard_intrinsics, &result);
+    let (shift, shift_rot) = projection_shift(&standard_intrinsics, &result);
     result.selection = Some(Selection {
         chosen,
         folds: auto.folds,
@@ -111,19 +111,24 @@ pub fn calibrate_auto(
         candidates: entries.into_iter().map(|(c, _)| c).collect(),
         reason,
         projection_shift_px: shift,
+        projection_shift_rot_px: shift_rot,
     });
     Ok(result)
 }
 
-/// Largest mapping error between `standard`'s intrinsics and the result's, px.
-fn projection_shift(standard: &[Intrinsics], result: &Calibration) -> f64 {
-    result
-        .dataset
-        .cameras
-        .iter()
+/// Largest mapping error between `standard`'s intrinsics and the result's over
+/// the cameras, plain and with the virtual rotation profiled out, px.
+fn projection_shift(standard: &[Intrinsics], result: &Calibration) -> (f64, f64) {
+    let cameras = result.dataset.cameras.iter();
+    cameras
         .zip(standard.iter().zip(&result.state.intrinsics))
-        .map(|(cam, (a, b))| mapping_error(a, b, cam.width, cam.height))
-        .fold(0.0, f64::max)
+        .map(|(cam, (a, b))| {
+            (
+                mapping_error(a, b, cam.width, cam.height),
+                mapping_error_rot(a, b, cam.width, cam.height),
+            )
+        })
+        .fold((0.0, 0.0), |m, x| (m.0.max(x.0), m.1.max(x.1)))
 }
 
 /// A candidate's figures from its fit to all data, with its held-out error.
@@ -222,7 +227,7 @@ fn fold_error(
     held: &[usize],
 ) -> Result<HeldOut> {
     let train: Vec<usize> = (0..cv.num_frames()).filter(|j| !held.contains(j)).collect();
-    let trained = calibrate(
+    let trained = fit(
         &cv.subset(&train),
         &Request {
             method,

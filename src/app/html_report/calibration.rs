@@ -7,10 +7,10 @@
 use crate::app::html_report::fields;
 use crate::app::html_report::figures;
 use crate::app::html_report::page::{self, escape, para, subsection, Page};
+use crate::app::lint::FrameFiles as FrameLabels;
 use crate::app::plots;
 use crate::app::plots::short;
 use crate::app::report;
-use crate::app::lint::FrameFiles as FrameLabels;
 use crate::error::Result;
 use crate::model::board::Method;
 use crate::solver::calibrate::Calibration;
