@@ -48,33 +48,6 @@ pub fn write_maps(dir: &Path, c: &Calibration) -> Result<()> {
     Ok(())
 }
 
-/// Viridis, sampled at nine points (matplotlib's table).
-const VIRIDIS: [(u8, u8, u8); 9] = [
-    (68, 1, 84),
-    (71, 44, 122),
-    (59, 81, 139),
-    (44, 113, 142),
-    (33, 144, 141),
-    (39, 173, 129),
-    (92, 200, 99),
-    (170, 220, 50),
-    (253, 231, 37),
-];
-
-fn viridis(t: f64) -> RGBColor {
-    let t = if t.is_finite() {
-        t.clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let x = t * (VIRIDIS.len() - 1) as f64;
-    let i = (x.floor() as usize).min(VIRIDIS.len() - 2);
-    let f = x - i as f64;
-    let (a, b) = (VIRIDIS[i], VIRIDIS[i + 1]);
-    let mix = |p: u8, q: u8| (p as f64 + (q as f64 - p as f64) * f).round() as u8;
-    RGBColor(mix(a.0, b.0), mix(a.1, b.1), mix(a.2, b.2))
-}
-
 /// Contour levels at a round step (1, 2, 2.5 or 5 × 10ⁿ), about eight from below
 /// `lo` to above `hi`: the colours then span the map's own range, which for a
 /// well-calibrated camera is narrow and far from zero.
@@ -169,7 +142,7 @@ fn draw(svg: &mut String, title: &str, map: &UncertaintyMap) -> std::result::Res
             let v = map.sigma_px[r * map.columns + c];
             let (x0, y0) = (c as f64 * cw - 0.5, r as f64 * ch - 0.5);
             let fill = if v.is_finite() {
-                viridis((v - bottom) / (top - bottom))
+                crate::app::plots::sequential((v - bottom) / (top - bottom))
             } else {
                 RGBColor(220, 220, 220)
             };
@@ -215,7 +188,10 @@ fn draw_bar<DB: DrawingBackend>(
     bar.draw_series((0..steps).map(|k| {
         let (a, b) = (k as f64 / steps as f64, (k + 1) as f64 / steps as f64);
         let (ya, yb) = (bottom + span * a, bottom + span * b);
-        Rectangle::new([(0.0, ya), (1.0, yb)], viridis((a + b) / 2.0).filled())
+        Rectangle::new(
+            [(0.0, ya), (1.0, yb)],
+            crate::app::plots::sequential((a + b) / 2.0).filled(),
+        )
     }))
     .map_err(err)?;
     bar.draw_series(
