@@ -516,8 +516,9 @@ fn print_summary(summary: &deformcal::app::protocol_report::Summary) {
             "  {:9} {:>16} {:>16} {:>16} {:>7}",
             "method", "train RMSE", "test RMSE", "map. error (px)", "failed"
         );
-        for m in &h.methods {
-            let s = &summary.methods[m.name()];
+        let names = h.methods.iter().map(|m| m.name());
+        for name in names.chain(h.auto.as_ref().map(|_| "auto")) {
+            let s = &summary.methods[name];
             let f = |key: &str| {
                 s.metrics
                     .get(key)
@@ -531,13 +532,21 @@ fn print_summary(summary: &deformcal::app::protocol_report::Summary) {
             };
             println!(
                 "  {:9} {:>16} {:>16} {:>16} {:>7}",
-                m.name(),
+                name,
                 f("rmse_px"),
                 f(&camera_key(h, k, "test_rmse_px")),
                 f(&camera_key(h, k, mapping)),
                 s.failed
             );
         }
+    }
+    if !summary.auto_choices.is_empty() {
+        let choices: Vec<String> = summary
+            .auto_choices
+            .iter()
+            .map(|(m, n)| format!("{m} {n}×"))
+            .collect();
+        println!("  auto chose: {}", choices.join(", "));
     }
 }
 

@@ -19,6 +19,7 @@ fn setup(preset: &str, reference_images: usize, subsets: usize, methods: &[Metho
         images_per_subset: 25,
         seed: 7,
         methods: methods.to_vec(),
+        auto: false,
     };
     prepare(&config, &protocol).unwrap()
 }
@@ -87,6 +88,74 @@ fn same_seed_same_results_across_threads_and_shards() {
         shards[1].clone()
     ])
     .is_err());
+}
+
+/// `"auto"` among the protocol's methods: one more row per subset, with the method
+/// `auto` chose, whose calibration is that method's on the same subset.
+#[test]
+fn protocol_records_the_auto_choice_per_subset() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = "[data]\nsynthetic = \"t2\"\n[reference]\nsynthetic = \"reference\"\nimages = 80\n\
+                [protocol]\nsubsets = 3\nmethods = [\"standard\", \"dynamic\", \"full\", \"auto\"]\n";
+    let config = Config::parse(text, &dir.path().join("c.toml")).unwrap();
+    let protocol = config.protocol.clone().unwrap();
+    assert!(protocol.auto);
+    assert_eq!(protocol.methods.len(), 3);
+    let s = prepare(&config, &protocol).unwrap();
+    assert_eq!(s.header.tasks(), 3 * 4);
+    let rows = run_on(&s, 2, None);
+    let autos: Vec<_> = rows.iter().filter(|r| r.auto).collect();
+    assert_eq!(autos.len(), 3);
+    for a in &autos {
+        assert!(a.ok(), "{:?}", a.error);
+        let sel = a.selection.as_ref().expect("auto's evidence");
+        assert_eq!(sel.chosen, a.method);
+        // The bending T2 board: auto keeps a method that models the bend (issue 14).
+        assert!(
+            matches!(a.method, Method::Dynamic | Method::Full),
+            "{}",
+            a.method
+        );
+        let fixed = rows
+            .iter()
+            .find(|r| r.subset == a.subset && r.is_fixed(a.method))
+            .unwrap();
+        assert_eq!(fixed.cameras[0].intrinsics, a.cameras[0].intrinsics);
+        assert_eq!(
+            fixed.cameras[0].truth_mapping_error_px,
+            a.cameras[0].truth_mapping_error_px
+        );
+    }
+    let sum = summarise(&s.header, &rows);
+    assert_eq!(sum.auto_choices.values().sum::<usize>(), 3);
+    assert_eq!(sum.methods["auto"].calibrations, 3);
+    // Fixed-method statistics do not take in auto's rows.
+    assert_eq!(sum.methods["dynamic"].calibrations, 3);
+    let csv = String::from_utf8(protocol_csv(&s.header, &rows).unwrap()).unwrap();
+    let auto_lines: Vec<&str> = csv
+        .lines()
+        .filter(|l| l.split(',').nth(1) == Some("auto"))
+        .collect();
+    assert_eq!(auto_lines.len(), 3);
+    assert!(auto_lines
+        .iter()
+        .all(|l| l.contains(",dynamic,") || l.contains(",full,")));
+    // Shards that split auto's tasks merge back into the same rows.
+    let shards: Vec<ShardFile> = (0..2)
+        .map(|i| ShardFile {
+            header: s.header.clone(),
+            shard: [i, 2],
+            rows: run_on(&s, 1, Some(Shard { index: i, count: 2 })),
+        })
+        .collect();
+    let (_, merged) = merge(shards).unwrap();
+    assert_eq!(merged, rows);
+    // `auto` twice is refused with the key named.
+    let twice = text.replace("\"full\", \"auto\"", "\"auto\", \"auto\"");
+    let err = Config::parse(&twice, &dir.path().join("c.toml"))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("auto") && err.contains("twice"), "{err}");
 }
 
 #[test]
@@ -275,6 +344,7 @@ fn a_failed_subset_is_recorded_and_the_run_goes_on() {
         images_per_subset: 4,
         seed: 1,
         methods: vec![Method::Standard],
+        auto: false,
     };
     let s = prepare(&config, &protocol).unwrap();
     let rows = run_on(&s, 2, None);

@@ -311,6 +311,7 @@ fn protocol_rows_carry_the_prediction_and_the_report_compares_it() {
         images_per_subset: 20,
         seed: 7,
         methods: vec![Method::Standard, Method::Dynamic],
+        auto: false,
     };
     let setup = prepare(&config, &protocol).unwrap();
     let rows = setup.run(None, &|| {});

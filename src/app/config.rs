@@ -130,12 +130,16 @@ struct RawReference {
 
 /// `[protocol]`: the evaluation protocol (SPEC §4).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields, default)]
+#[serde(try_from = "RawProtocol")]
 pub struct ProtocolConfig {
     pub subsets: usize,
     pub images_per_subset: usize,
     pub seed: u64,
+    /// The fixed methods, each calibrated on every subset.
     pub methods: Vec<Method>,
+    /// `"auto"` among the config's methods: every subset also records the method
+    /// `auto` picks (with `[calibration]`'s candidates, folds and seed).
+    pub auto: bool,
 }
 
 impl Default for ProtocolConfig {
@@ -145,7 +149,50 @@ impl Default for ProtocolConfig {
             images_per_subset: 25,
             seed: 7,
             methods: Method::ALL.to_vec(),
+            auto: false,
         }
+    }
+}
+
+/// `[protocol]` as written: `methods` may name `auto` beside the fixed methods.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawProtocol {
+    subsets: Option<usize>,
+    images_per_subset: Option<usize>,
+    seed: Option<u64>,
+    methods: Option<Vec<MethodChoice>>,
+}
+
+impl TryFrom<RawProtocol> for ProtocolConfig {
+    type Error = String;
+
+    fn try_from(r: RawProtocol) -> std::result::Result<Self, String> {
+        let d = ProtocolConfig::default();
+        let (methods, auto) = match r.methods {
+            None => (d.methods, false),
+            Some(choices) => {
+                let autos = choices.iter().filter(|c| **c == MethodChoice::Auto).count();
+                if autos > 1 {
+                    return Err("protocol.methods lists `auto` twice".into());
+                }
+                let fixed = choices
+                    .iter()
+                    .filter_map(|c| match c {
+                        MethodChoice::Fixed(m) => Some(*m),
+                        MethodChoice::Auto => None,
+                    })
+                    .collect();
+                (fixed, autos == 1)
+            }
+        };
+        Ok(ProtocolConfig {
+            subsets: r.subsets.unwrap_or(d.subsets),
+            images_per_subset: r.images_per_subset.unwrap_or(d.images_per_subset),
+            seed: r.seed.unwrap_or(d.seed),
+            methods,
+            auto,
+        })
     }
 }
 
@@ -474,7 +521,7 @@ impl Checker<'_> {
                 p.images_per_subset
             )));
         }
-        if p.methods.is_empty() {
+        if p.methods.is_empty() && !p.auto {
             return Err(self.err("protocol.methods must name at least one method".into()));
         }
         if let Some((_, m)) = p

@@ -8,12 +8,14 @@ use crate::model::camera::CameraSpec;
 use crate::model::dataset::Dataset;
 use crate::model::lens::Intrinsics;
 use crate::model::metrics::{mapping_error, mapping_error_rot};
+use crate::model::selection::{AutoSettings, Selection};
 use crate::model::state::State;
 use crate::model::synthetic::Truth;
 use crate::model::target::Target;
 use crate::model::uncertainty::CameraUncertainty;
 use crate::solver::calibrate::{calibrate, Calibration, Request};
 use crate::solver::problem::{rmse, Hold, Problem, SolverSettings};
+use crate::solver::select::calibrate_auto;
 use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
@@ -72,12 +74,62 @@ pub struct Header {
     pub reference: Option<ReferenceInfo>,
     /// True intrinsics per camera (synthetic data).
     pub truth: Option<Vec<Intrinsics>>,
+    /// How `auto` chose per subset, when the run records its choice.
+    #[serde(default)]
+    pub auto: Option<AutoRun>,
+}
+
+/// `auto`'s settings in a protocol run: every subset gets one more task, which
+/// cross-validates these candidates and records the method it keeps.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AutoRun {
+    pub candidates: Vec<Method>,
+    pub folds: usize,
+    pub seed: u64,
+}
+
+/// What task `t` of the grid runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Task {
+    /// Calibrate subset `.0` with a fixed method.
+    Fixed(usize, Method),
+    /// Let `auto` choose a method for subset `.0`.
+    Auto(usize),
 }
 
 impl Header {
+    /// Tasks per subset: the fixed methods, then `auto` if it is recorded.
+    fn per_subset(&self) -> usize {
+        self.methods.len() + usize::from(self.auto.is_some())
+    }
+
     /// Number of subset × method tasks.
     pub fn tasks(&self) -> usize {
-        self.subsets.saturating_mul(self.methods.len())
+        self.subsets.saturating_mul(self.per_subset())
+    }
+
+    /// What task `t` runs (fixed methods first within a subset, `auto` last).
+    pub fn task(&self, t: usize) -> Task {
+        let per = self.per_subset();
+        let (subset, slot) = (t / per, t % per);
+        match self.methods.get(slot) {
+            Some(&m) => Task::Fixed(subset, m),
+            None => Task::Auto(subset),
+        }
+    }
+
+    /// The task a row answers, if it lies inside this run's grid.
+    fn slot_of(&self, row: &Row) -> Option<usize> {
+        let slot = if row.auto {
+            self.auto.as_ref().map(|_| self.methods.len())?
+        } else {
+            self.methods.iter().position(|&x| x == row.method)?
+        };
+        let t = row
+            .subset
+            .checked_mul(self.per_subset())?
+            .checked_add(slot)?;
+        (t < self.tasks()).then_some(t)
     }
 
     /// Refuses a header whose sizes are out of bounds (a hand-edited or corrupt
@@ -89,7 +141,9 @@ impl Header {
                 self.subsets
             )));
         }
-        if self.methods.is_empty() || self.methods.len() > Method::ALL.len() {
+        if (self.methods.is_empty() && self.auto.is_none())
+            || self.methods.len() > Method::ALL.len()
+        {
             return Err(Error::Invalid(format!(
                 "the run claims {} methods; 1 to {} are possible",
                 self.methods.len(),
@@ -139,6 +193,12 @@ pub struct Row {
     /// The share of the residual the noise does not explain (SPEC §3a).
     #[serde(default)]
     pub bias_ratio: Option<f64>,
+    /// This row is `auto`'s: `method` is the method it chose (see `selection`).
+    #[serde(default)]
+    pub auto: bool,
+    /// `auto`'s evidence and reason (its rows only, when the choice succeeded).
+    #[serde(default)]
+    pub selection: Option<Selection>,
 }
 
 /// One camera's results in a [`Row`].
@@ -164,6 +224,20 @@ impl Row {
     /// Whether the calibration succeeded.
     pub fn ok(&self) -> bool {
         self.error.is_none()
+    }
+
+    /// `auto` for `auto`'s rows, else the method's name: the outputs' method column.
+    pub fn label(&self) -> &'static str {
+        if self.auto {
+            "auto"
+        } else {
+            self.method.name()
+        }
+    }
+
+    /// Whether this row is a calibration with the fixed method `m` (not `auto`'s).
+    pub fn is_fixed(&self, m: Method) -> bool {
+        !self.auto && self.method == m
     }
 }
 
@@ -331,6 +405,14 @@ pub fn prepare(config: &Config, protocol: &ProtocolConfig) -> Result<Setup> {
             converged: c.converged,
         }),
         truth: truth.as_ref().map(|t| t.intrinsics.clone()),
+        auto: protocol.auto.then(|| {
+            let a = AutoSettings::from(&config.calibration);
+            AutoRun {
+                candidates: a.candidates,
+                folds: a.folds,
+                seed: a.seed,
+            }
+        }),
     };
     Ok(Setup {
         header,
@@ -462,8 +544,10 @@ impl Setup {
 
     /// Runs one subset × method task; failures become a row with the reason.
     pub fn task(&self, t: usize) -> Row {
-        let methods = &self.header.methods;
-        let (subset, method) = (t / methods.len(), methods[t % methods.len()]);
+        let (subset, method, auto) = match self.header.task(t) {
+            Task::Fixed(s, m) => (s, m, false),
+            Task::Auto(s) => (s, Method::Standard, true),
+        };
         let data = self.dataset.subset(&self.subsets[subset]);
         let mut row = Row {
             subset,
@@ -479,19 +563,37 @@ impl Setup {
             deformations: Vec::new(),
             max_out_of_plane_m: Vec::new(),
             bias_ratio: None,
+            auto,
+            selection: None,
         };
         let request = Request {
             method,
             settings: self.settings.clone(),
             gauge: None,
         };
-        let mut c = match calibrate(&data, &request) {
+        let solved = match &self.header.auto {
+            Some(a) if auto => {
+                let settings = AutoSettings {
+                    candidates: a.candidates.clone(),
+                    folds: a.folds,
+                    seed: a.seed,
+                    detector_noise_px: self.detector_noise_px,
+                };
+                calibrate_auto(&data, &request, &settings, &|| {})
+            }
+            _ => calibrate(&data, &request),
+        };
+        let mut c = match solved {
             Ok(c) => c,
             Err(e) => {
                 row.error = Some(e.to_string());
                 return row;
             }
         };
+        if let Some(s) = c.selection.take() {
+            row.method = s.chosen;
+            row.selection = Some(s);
+        }
         row.images = c.dataset.num_frames();
         row.observations = c.dataset.observations.len();
         row.frames = c.dataset.frame_ids.clone();
@@ -506,7 +608,7 @@ impl Setup {
             let camera = self.camera_row(&c, k, u, &mut row.error);
             row.cameras.push(camera);
         }
-        if method.has_paraboloid() {
+        if row.method.has_paraboloid() {
             row.deformations = c.state.deformations.clone();
             row.max_out_of_plane_m = c
                 .state
@@ -548,7 +650,6 @@ pub fn merge(files: Vec<ShardFile>) -> Result<(Header, Vec<Row>)> {
     let header = first.header.clone();
     header.check()?;
     let mut slots: Vec<Option<Row>> = vec![None; header.tasks()];
-    let m = header.methods.len();
     for f in files {
         if f.header != header {
             return Err(Error::Invalid(format!(
@@ -557,23 +658,14 @@ pub fn merge(files: Vec<ShardFile>) -> Result<(Header, Vec<Row>)> {
             )));
         }
         for row in f.rows {
-            let Some(mi) = header.methods.iter().position(|&x| x == row.method) else {
+            let Some(t) = header.slot_of(&row) else {
                 return Err(Error::Invalid(format!(
-                    "a row has method {} outside the run",
-                    row.method
+                    "a row (subset {}, method {}{}) lies outside the run",
+                    row.subset,
+                    row.method,
+                    if row.auto { ", auto" } else { "" }
                 )));
             };
-            let t = row
-                .subset
-                .checked_mul(m)
-                .and_then(|t| t.checked_add(mi))
-                .unwrap_or(usize::MAX);
-            if t >= slots.len() {
-                return Err(Error::Invalid(format!(
-                    "a row has subset {} outside the run",
-                    row.subset
-                )));
-            }
             if slots[t].is_some() {
                 return Err(Error::Invalid(format!(
                     "subset {} × {} appears in two shards",

@@ -30,7 +30,11 @@ pub struct MethodSummary {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Summary {
     pub header: Header,
+    /// Per fixed method, and `auto` (its chosen calibrations) when recorded.
     pub methods: BTreeMap<String, MethodSummary>,
+    /// How many subsets `auto` gave to each method.
+    #[serde(default)]
+    pub auto_choices: BTreeMap<String, usize>,
 }
 
 type Getter = fn(&Row) -> Vec<f64>;
@@ -86,11 +90,34 @@ pub fn camera_key(header: &Header, k: usize, metric: &str) -> String {
     }
 }
 
-/// Summarises rows per method.
+/// Summarises rows per method (and `auto`'s rows under `auto`).
 pub fn summarise(header: &Header, rows: &[Row]) -> Summary {
     let mut methods = BTreeMap::new();
     for &m in &header.methods {
-        let all: Vec<&Row> = rows.iter().filter(|r| r.method == m).collect();
+        let all: Vec<&Row> = rows.iter().filter(|r| r.is_fixed(m)).collect();
+        methods.insert(m.name().to_string(), method_summary(header, &all));
+    }
+    let mut auto_choices = BTreeMap::new();
+    if header.auto.is_some() {
+        let all: Vec<&Row> = rows.iter().filter(|r| r.auto).collect();
+        methods.insert(AUTO.to_string(), method_summary(header, &all));
+        for r in all.iter().filter(|r| r.ok()) {
+            *auto_choices.entry(r.method.name().to_string()).or_insert(0) += 1;
+        }
+    }
+    Summary {
+        header: header.clone(),
+        methods,
+        auto_choices,
+    }
+}
+
+/// The name `auto`'s rows carry in the outputs.
+const AUTO: &str = "auto";
+
+/// The statistics of one method's rows.
+fn method_summary(header: &Header, all: &[&Row]) -> MethodSummary {
+    {
         let ok: Vec<&Row> = all.iter().copied().filter(|r| r.ok()).collect();
         let mut metrics = BTreeMap::new();
         for (name, get) in ROW_METRICS {
@@ -114,19 +141,12 @@ pub fn summarise(header: &Header, rows: &[Row]) -> Summary {
                 }
             }
         }
-        methods.insert(
-            m.name().to_string(),
-            MethodSummary {
-                calibrations: all.len(),
-                failed: all.len() - ok.len(),
-                not_converged: ok.iter().filter(|r| !r.converged).count(),
-                metrics,
-            },
-        );
-    }
-    Summary {
-        header: header.clone(),
-        methods,
+        MethodSummary {
+            calibrations: all.len(),
+            failed: all.len() - ok.len(),
+            not_converged: ok.iter().filter(|r| !r.converged).count(),
+            metrics,
+        }
     }
 }
 
@@ -150,6 +170,7 @@ pub fn protocol_csv(header: &Header, rows: &[Row]) -> Result<Vec<u8>> {
         "iterations",
         "rmse_px",
         "bias_ratio",
+        "auto_choice",
     ];
     columns.extend(CAMERA_METRICS.iter().map(|(n, _)| *n));
     columns.extend(["max_out_of_plane_m_mean", "max_out_of_plane_m_max"]);
@@ -163,7 +184,7 @@ pub fn protocol_csv(header: &Header, rows: &[Row]) -> Result<Vec<u8>> {
             let c = r.cameras.get(k);
             let mut rec = vec![
                 r.subset.to_string(),
-                r.method.name().to_string(),
+                r.label().to_string(),
                 cam.name.clone(),
                 if r.ok() { "ok" } else { "failed" }.to_string(),
                 r.error.clone().unwrap_or_default(),
@@ -173,6 +194,12 @@ pub fn protocol_csv(header: &Header, rows: &[Row]) -> Result<Vec<u8>> {
                 r.iterations.to_string(),
                 cell(r.rmse_px),
                 cell(r.bias_ratio),
+                if r.auto && r.ok() {
+                    r.method.name()
+                } else {
+                    ""
+                }
+                .to_string(),
             ];
             rec.extend(CAMERA_METRICS.iter().map(|(_, get)| cell(c.and_then(get))));
             rec.extend([cell(bends), cell(max_bend)]);
@@ -201,7 +228,11 @@ pub fn deformations_csv(rows: &[Row]) -> Vec<u8> {
             let _ = writeln!(
                 s,
                 "{},{},{f},{},{},{},{m}",
-                r.subset, r.method, d.a, d.b, d.c
+                r.subset,
+                r.label(),
+                d.a,
+                d.b,
+                d.c
             );
         }
     }
@@ -222,16 +253,31 @@ fn pm(s: Option<&Stat>, scale: f64, digits: usize) -> String {
 }
 
 fn groups(header: &Header, rows: &[Row], get: impl Fn(&Row) -> Vec<f64>) -> Vec<Vec<f64>> {
-    header
-        .methods
-        .iter()
-        .map(|&m| {
+    (0..columns(header).len())
+        .map(|i| {
             rows.iter()
-                .filter(|r| r.method == m && r.ok())
+                .filter(|r| r.ok() && in_column(header, i, r))
                 .flat_map(&get)
                 .collect()
         })
         .collect()
+}
+
+/// The plots' columns: every fixed method, then `auto` when the run recorded it.
+fn columns(h: &Header) -> Vec<String> {
+    let mut cats: Vec<String> = h.methods.iter().map(|m| m.name().to_string()).collect();
+    if h.auto.is_some() {
+        cats.push(AUTO.into());
+    }
+    cats
+}
+
+/// Whether `r` belongs to column `i` of [`columns`].
+fn in_column(h: &Header, i: usize, r: &Row) -> bool {
+    match h.methods.get(i) {
+        Some(&m) => r.is_fixed(m),
+        None => r.auto,
+    }
 }
 
 /// Per-camera values of one metric across rows, grouped per method.
@@ -587,7 +633,7 @@ fn write_uncertainty(s: &mut String, summary: &Summary, rows: &[Row]) {
     );
     for k in 0..h.cameras.len() {
         for &m in &h.methods {
-            let ok: Vec<&Row> = rows.iter().filter(|r| r.method == m && r.ok()).collect();
+            let ok: Vec<&Row> = rows.iter().filter(|r| r.is_fixed(m) && r.ok()).collect();
             let of =
                 |get: CameraGetter| rms(ok.iter().filter_map(|r| r.cameras.get(k).and_then(get)));
             let predicted = of(|c| c.expected_mapping_error_px);
@@ -618,6 +664,162 @@ fn write_uncertainty(s: &mut String, summary: &Summary, rows: &[Row]) {
     );
 }
 
+/// What `auto` chose per subset and how its calibrations fared against each
+/// fixed method on the same subsets (when the run recorded `auto`).
+fn auto_table(summary: &Summary, rows: &[Row]) -> Option<Table> {
+    let h = &summary.header;
+    let a = h.auto.as_ref()?;
+    let auto_rows: Vec<&Row> = rows.iter().filter(|r| r.auto).collect();
+    let key = if h.truth.is_some() {
+        "truth_mapping_error_px"
+    } else {
+        "mapping_error_px"
+    };
+    let error_of = |r: &Row| auto_error(h, r);
+    let mut table_rows = Vec::new();
+    for m in Method::ALL {
+        let chose: Vec<&Row> = auto_rows
+            .iter()
+            .copied()
+            .filter(|r| r.ok() && r.method == m)
+            .collect();
+        if chose.is_empty() {
+            continue;
+        }
+        table_rows.push(vec![
+            format!("`{m}`"),
+            chose.len().to_string(),
+            pm(
+                Stat::of(chose.iter().filter_map(|r| error_of(r))).as_ref(),
+                1.0,
+                3,
+            ),
+        ]);
+    }
+    table_rows.push(vec![
+        "all subsets".into(),
+        auto_rows.iter().filter(|r| r.ok()).count().to_string(),
+        pm(
+            summary.methods.get(AUTO).and_then(|s| s.metrics.get(key)),
+            1.0,
+            3,
+        ),
+    ]);
+    let worse = worse_than_standard(rows, error_of);
+    Some(Table {
+        title: "The method `auto` chooses per subset".into(),
+        head: vec![
+            "chosen".into(),
+            "subsets".into(),
+            format!(
+                "mapping error to {} of {} (px)",
+                if h.truth.is_some() { "truth" } else { "reference" },
+                h.cameras[0].name
+            ),
+        ],
+        rows: table_rows,
+        figures: vec![figure(
+            AUTO_SVG,
+            "auto's choices",
+            &format!(
+                "One dot per subset, in the column of the method `auto` chose; the line is `standard`'s \
+                 mean. `auto` cross-validates {} over {} folds (seed {}) on each subset and keeps the \
+                 best unless a simpler method is within its noise. {}",
+                a.candidates.iter().map(|m| format!("`{m}`")).collect::<Vec<_>>().join(", "),
+                a.folds,
+                a.seed,
+                worse
+            ),
+        )],
+    })
+}
+
+/// The file of the `auto` figure.
+const AUTO_SVG: &str = "auto.svg";
+
+/// The mapping error `auto`'s figure and table show: to the truth when known.
+fn auto_error(h: &Header, r: &Row) -> Option<f64> {
+    let c = r.cameras.first()?;
+    if h.truth.is_some() {
+        c.truth_mapping_error_px
+    } else {
+        c.mapping_error_px
+    }
+}
+
+/// `auto.svg`: each subset's error, in the column of the method `auto` chose.
+fn plot_auto(h: &Header, rows: &[Row]) -> Result<Option<String>> {
+    if h.auto.is_none() {
+        return Ok(None);
+    }
+    let cats: Vec<String> = Method::ALL.iter().map(|m| m.name().to_string()).collect();
+    let groups = Method::ALL
+        .iter()
+        .map(|&m| {
+            rows.iter()
+                .filter(|r| r.auto && r.ok() && r.method == m)
+                .filter_map(|r| auto_error(h, r))
+                .collect()
+        })
+        .collect();
+    let standard = Stat::of(
+        rows.iter()
+            .filter(|r| r.ok() && r.is_fixed(Method::Standard))
+            .filter_map(|r| auto_error(h, r)),
+    );
+    let lines: Vec<HLine> = standard
+        .map(|s| HLine {
+            value: s.mean,
+            name: "standard, mean",
+            color: BLACK_RGB,
+        })
+        .into_iter()
+        .collect();
+    let axis = if h.truth.is_some() {
+        "mapping error to truth (px)"
+    } else {
+        "mapping error to reference (px)"
+    };
+    let series = [Series {
+        name: "auto",
+        color: PALETTE[0],
+        groups,
+    }];
+    plots::strip_chart_svg(
+        &format!("{}: the method auto chose", h.dataset),
+        Axes {
+            x: "method chosen",
+            y: axis,
+        },
+        &cats,
+        &series,
+        &lines,
+    )
+    .map(Some)
+}
+
+/// How often `auto`'s calibration has a larger error than `standard`'s on the same subset.
+fn worse_than_standard(rows: &[Row], error_of: impl Fn(&Row) -> Option<f64>) -> String {
+    let standard: BTreeMap<usize, f64> = rows
+        .iter()
+        .filter(|r| r.is_fixed(Method::Standard) && r.ok())
+        .filter_map(|r| Some((r.subset, error_of(r)?)))
+        .collect();
+    if standard.is_empty() {
+        return String::new();
+    }
+    let pairs: Vec<(f64, f64)> = rows
+        .iter()
+        .filter(|r| r.auto && r.ok())
+        .filter_map(|r| Some((error_of(r)?, *standard.get(&r.subset)?)))
+        .collect();
+    let worse = pairs.iter().filter(|(a, s)| a > s).count();
+    format!(
+        "On {worse} of {} subsets its error is larger than `standard`'s on the same subset.",
+        pairs.len()
+    )
+}
+
 /// The failed calibrations and their reasons, if any.
 fn failed_table(rows: &[Row]) -> Option<Table> {
     let failed: Vec<Vec<String>> = rows
@@ -626,7 +828,7 @@ fn failed_table(rows: &[Row]) -> Option<Table> {
         .map(|r| {
             vec![
                 r.subset.to_string(),
-                r.method.to_string(),
+                r.label().to_string(),
                 r.error.as_deref().unwrap_or("").replace('|', "/"),
             ]
         })
@@ -645,6 +847,7 @@ pub fn report_tables(summary: &Summary, rows: &[Row]) -> Vec<Table> {
     tables.extend(intrinsics_tables(summary));
     tables.push(mapping_table(summary));
     tables.extend(bending_table(summary, rows));
+    tables.extend(auto_table(summary, rows));
     tables.extend(failed_table(rows));
     tables
 }
@@ -696,7 +899,7 @@ pub fn dataset_report(summary: &Summary, rows: &[Row]) -> Result<DatasetReport> 
 fn most_bent(rows: &[Row]) -> Option<(&Row, usize)> {
     let pick = |m: Method| {
         rows.iter()
-            .filter(|r| r.ok() && r.method == m && !r.deformations.is_empty())
+            .filter(|r| r.ok() && r.is_fixed(m) && !r.deformations.is_empty())
             .min_by_key(|r| r.subset)
     };
     let r = pick(Method::Full).or_else(|| pick(Method::Dynamic))?;
@@ -868,7 +1071,7 @@ fn plot_bend(h: &Header, rows: &[Row]) -> Result<Option<String>> {
         .iter()
         .map(|&m| {
             rows.iter()
-                .filter(|r| r.method == m && r.ok())
+                .filter(|r| r.is_fixed(m) && r.ok())
                 .flat_map(|r| r.max_out_of_plane_m.iter().map(|v| v * 1e3))
                 .collect()
         })
@@ -894,7 +1097,7 @@ fn plot_bend(h: &Header, rows: &[Row]) -> Result<Option<String>> {
 /// Every SVG plot of one dataset, by file name.
 pub fn plots(summary: &Summary, rows: &[Row]) -> Result<Vec<(String, String)>> {
     let h = &summary.header;
-    let cats: Vec<String> = h.methods.iter().map(|m| m.name().to_string()).collect();
+    let cats = columns(h);
     let mut out = vec![
         ("rmse.svg".to_string(), plot_rmse(h, &cats, rows)?),
         (
@@ -905,6 +1108,9 @@ pub fn plots(summary: &Summary, rows: &[Row]) -> Result<Vec<(String, String)>> {
     ];
     if let Some(svg) = plot_bend(h, rows)? {
         out.push(("bend.svg".to_string(), svg));
+    }
+    if let Some(svg) = plot_auto(h, rows)? {
+        out.push((AUTO_SVG.to_string(), svg));
     }
     if let Some((r, j)) = most_bent(rows) {
         let svg = plots::deformation_svg(
