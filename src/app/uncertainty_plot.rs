@@ -4,6 +4,7 @@
 //! numbers are `model::uncertainty`'s; this file only draws them.
 use crate::app::exports::file_stem;
 use crate::app::fsio::{write_atomic, UNCERTAINTY_MAP_PREFIX};
+use crate::app::plots;
 use crate::error::{Error, Result};
 use crate::model::uncertainty::{projection_uncertainty_map, UncertaintyMap};
 use crate::solver::calibrate::Calibration;
@@ -73,36 +74,17 @@ pub fn levels(lo: f64, hi: f64) -> Vec<f64> {
     (first..=last).map(|i| i as f64 * step).collect()
 }
 
-/// Contour segments of `level` over the map's cell centres (marching squares).
+/// Contour segments of `level` over the map's cell centres, in pixels.
 fn contour(map: &UncertaintyMap, level: f64) -> Vec<[(f64, f64); 2]> {
-    let at = |c: usize, r: usize| map.sigma_px[r * map.columns + c];
-    let mut out = Vec::new();
-    for r in 0..map.rows.saturating_sub(1) {
-        for c in 0..map.columns.saturating_sub(1) {
-            let corners = [(c, r), (c + 1, r), (c + 1, r + 1), (c, r + 1)];
-            let values = corners.map(|(c, r)| at(c, r));
-            if values.iter().any(|v| !v.is_finite()) {
-                continue;
-            }
-            let mut crossings = Vec::with_capacity(4);
-            for e in 0..4 {
-                let (a, b) = (values[e], values[(e + 1) % 4]);
-                if (a < level) != (b < level) {
-                    let t = (level - a) / (b - a);
-                    let (pa, pb) = (
-                        map.centre(corners[e].0, corners[e].1),
-                        map.centre(corners[(e + 1) % 4].0, corners[(e + 1) % 4].1),
-                    );
-                    let p = pa + (pb - pa) * t;
-                    crossings.push((p.x, p.y));
-                }
-            }
-            for pair in crossings.chunks_exact(2) {
-                out.push([pair[0], pair[1]]);
-            }
-        }
-    }
-    out
+    let (sx, sy) = (
+        map.width as f64 / map.columns as f64,
+        map.height as f64 / map.rows as f64,
+    );
+    let pixel = |(c, r): (f64, f64)| ((c + 0.5) * sx - 0.5, (r + 0.5) * sy - 0.5);
+    plots::contour_segments(&map.sigma_px, map.columns, map.rows, level)
+        .into_iter()
+        .map(|[a, b]| [pixel(a), pixel(b)])
+        .collect()
 }
 
 fn err<E: std::fmt::Debug>(e: E) -> String {

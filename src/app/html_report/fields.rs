@@ -85,7 +85,7 @@ impl<T> Grid<T> {
         )
     }
 
-    /// The pixel at fractional cell coordinates (as [`contour_segments`] returns).
+    /// The pixel at fractional cell coordinates (as [`crate::app::plots::contour_segments`] returns).
     pub fn pixel(&self, (gx, gy): (f64, f64)) -> (f64, f64) {
         ((gx + 0.5) * self.dx - 0.5, (gy + 0.5) * self.dy - 0.5)
     }
@@ -130,76 +130,9 @@ pub fn displacement(k: &Intrinsics, u: f64, v: f64) -> Option<[f64; 2]> {
     Some([u - pu, v - pv])
 }
 
-/// The line segments where a scalar field on a grid crosses `level` (marching
-/// squares over the cell centres), in fractional cell coordinates. NaN values
-/// are holes: no line crosses a square touching one.
-pub fn contour_segments(values: &[f64], nx: usize, ny: usize, level: f64) -> Vec<[(f64, f64); 2]> {
-    let at = |i: usize, j: usize| values[j * nx + i];
-    let mut out = Vec::new();
-    for j in 0..ny.saturating_sub(1) {
-        for i in 0..nx.saturating_sub(1) {
-            // Corners counter-clockwise from (i, j).
-            let p = [(i, j), (i + 1, j), (i + 1, j + 1), (i, j + 1)];
-            let v = p.map(|(a, b)| at(a, b));
-            if v.iter().any(|x| !x.is_finite()) {
-                continue;
-            }
-            let mut cuts = Vec::with_capacity(4);
-            for e in 0..4 {
-                let (a, b) = (e, (e + 1) % 4);
-                if (v[a] > level) != (v[b] > level) {
-                    let t = (level - v[a]) / (v[b] - v[a]);
-                    let (pa, pb) = (p[a], p[b]);
-                    cuts.push((
-                        pa.0 as f64 + t * (pb.0 as f64 - pa.0 as f64),
-                        pa.1 as f64 + t * (pb.1 as f64 - pa.1 as f64),
-                    ));
-                }
-            }
-            match cuts.len() {
-                2 => out.push([cuts[0], cuts[1]]),
-                4 => {
-                    // A saddle: the centre decides which opposite corners connect.
-                    let centre = v.iter().sum::<f64>() / 4.0;
-                    if (centre > level) == (v[0] > level) {
-                        out.push([cuts[0], cuts[1]]);
-                        out.push([cuts[2], cuts[3]]);
-                    } else {
-                        out.push([cuts[3], cuts[0]]);
-                        out.push([cuts[1], cuts[2]]);
-                    }
-                }
-                _ => {}
-            }
-        }
-    }
-    out
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn contours_of_a_cone_are_circles_of_the_level_radius() {
-        // f = distance from the grid's centre: the contour at r is a circle of radius r.
-        let (nx, ny) = (41, 41);
-        let values: Vec<f64> = (0..nx * ny)
-            .map(|k| {
-                let (i, j) = ((k % nx) as f64 - 20.0, (k / nx) as f64 - 20.0);
-                (i * i + j * j).sqrt()
-            })
-            .collect();
-        let segs = contour_segments(&values, nx, ny, 12.3);
-        assert!(segs.len() > 40);
-        for s in segs {
-            for (x, y) in s {
-                let r = ((x - 20.0).powi(2) + (y - 20.0).powi(2)).sqrt();
-                // Linear interpolation of a cone between grid points: within 0.05 cells.
-                assert!((r - 12.3).abs() < 0.05, "{r}");
-            }
-        }
-    }
 
     #[test]
     fn a_pinhole_has_no_displacement_and_barrel_distortion_points_inward() {

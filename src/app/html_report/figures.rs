@@ -3,7 +3,8 @@
 //! static correction over the board and the bends along the sequence. What is
 //! drawn comes from `fields`; the shared primitives (arrows, colour maps, colour
 //! bars, the bend surface) from `app::plots`.
-use crate::app::html_report::fields::{contour_segments, Arrows, Grid};
+use crate::app::html_report::fields::{Arrows, Grid};
+use crate::app::plots::contour_segments;
 use crate::app::plots::{self, pe, short, Drawn, Mark, AXIS_DESC, LABEL, PALETTE, TITLE};
 use crate::error::Result;
 use crate::model::board::{Method, Paraboloid};
