@@ -14,11 +14,8 @@ use nalgebra::Vector2;
 use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use std::io::Write;
 use std::path::Path;
-use std::process::{Command, Stdio};
-
-const PYTHON: &str = "/usr/bin/python3";
+use std::process::Command;
 
 fn deformcal(args: &[&str]) -> String {
     let out = Command::new(env!("CARGO_BIN_EXE_deformcal"))
@@ -53,32 +50,13 @@ fn opencv_and_mrcal_read_our_models_and_project_like_us() {
             [r * a.cos(), 0.65 * r * a.sin(), 1.0 + (i % 7) as f64]
         })
         .collect();
-    let mut child = Command::new(PYTHON)
-        .arg(concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/tests/tools/check_exports.py"
-        ))
-        .arg(&out)
-        .args(["cam0", "cam1"])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("run /usr/bin/python3 (apt-get install python3-opencv python3-mrcal)");
     let payload = serde_json::json!({ "points": points }).to_string();
-    child
-        .stdin
-        .take()
-        .unwrap()
-        .write_all(payload.as_bytes())
-        .unwrap();
-    let result = child.wait_with_output().unwrap();
-    assert!(
-        result.status.success(),
-        "{}",
-        String::from_utf8_lossy(&result.stderr)
-    );
-    let tools: serde_json::Value = serde_json::from_slice(&result.stdout).unwrap();
+    let args = [
+        out.to_str().unwrap().to_string(),
+        "cam0".into(),
+        "cam1".into(),
+    ];
+    let tools = run_tool("check_exports.py", &args, &payload);
     for (k, cam) in json.cameras.iter().enumerate() {
         let t = &tools[&cam.name];
         let ours: Vec<[f64; 2]> = points
@@ -396,31 +374,7 @@ fn exports_of_every_lens_model_project_like_us() {
             mrcal.is_some(),
             "{model}: .cameramodel"
         );
-        // One warning per file left out, naming the file and the model.
-        let mut expected = Vec::new();
-        if opencv.is_none() {
-            expected.push("opencv.yaml".to_string());
-        }
-        if mrcal.is_none() {
-            expected.push(format!("{}.cameramodel", cam.name));
-        }
-        // The ROS, Kalibr and COLMAP warnings are checked in tests/exports.rs.
-        let ours: Vec<&String> = written
-            .warnings
-            .iter()
-            .filter(|w| w.starts_with("opencv.yaml") || w.contains(".cameramodel"))
-            .collect();
-        assert_eq!(ours.len(), expected.len(), "{model}: {ours:?}");
-        for file in &expected {
-            assert!(
-                written
-                    .warnings
-                    .iter()
-                    .any(|w| w.contains(file.as_str()) && w.contains(&format!("`{model}`"))),
-                "{model}: no warning naming {file} and the model: {:?}",
-                written.warnings
-            );
-        }
+        assert_left_out_files_are_named(model, &cam.name, &written.warnings, opencv, mrcal);
         if opencv.is_none() && mrcal.is_none() {
             continue;
         }
@@ -440,35 +394,79 @@ fn exports_of_every_lens_model_project_like_us() {
         if let Some(name) = mrcal {
             assert_eq!(t["lensmodel"].as_str(), Some(name), "{model}");
         }
-        for (tool, present) in [("opencv", opencv.is_some()), ("mrcal", mrcal.is_some())] {
-            if !present {
-                assert!(
-                    t[tool].is_null(),
-                    "{model}: {tool} read a file that is not there"
-                );
-                continue;
-            }
-            let mut worst = 0.0f64;
-            for (i, p) in points.iter().enumerate() {
-                let ours = k.project(&Vector3::from(*p)).unwrap();
-                let (u, v) = (
-                    t[tool][i][0].as_f64().unwrap(),
-                    t[tool][i][1].as_f64().unwrap(),
-                );
-                let diff = (u - ours.x).abs().max((v - ours.y).abs());
-                worst = worst.max(diff);
-                assert!(
-                    diff <= 1e-6,
-                    "{model} {tool} point {i} {p:?}: ({u}, {v}) vs ({}, {})",
-                    ours.x,
-                    ours.y
-                );
-            }
-            eprintln!(
-                "{model} via {tool}: {} points, max projection difference {worst:.2e} px",
-                points.len()
+        assert_tools_project_like_us(model, &k, &points, t, opencv.is_some(), mrcal.is_some());
+    }
+}
+
+/// One warning per export file left out, naming the file and the model.
+fn assert_left_out_files_are_named(
+    model: LensModel,
+    camera: &str,
+    warnings: &[String],
+    opencv: Option<(&str, u64)>,
+    mrcal: Option<&str>,
+) {
+    let mut expected = Vec::new();
+    if opencv.is_none() {
+        expected.push("opencv.yaml".to_string());
+    }
+    if mrcal.is_none() {
+        expected.push(format!("{camera}.cameramodel"));
+    }
+    // The ROS, Kalibr and COLMAP warnings are checked in tests/exports.rs.
+    let ours: Vec<&String> = warnings
+        .iter()
+        .filter(|w| w.starts_with("opencv.yaml") || w.contains(".cameramodel"))
+        .collect();
+    assert_eq!(ours.len(), expected.len(), "{model}: {ours:?}");
+    for file in &expected {
+        assert!(
+            warnings
+                .iter()
+                .any(|w| w.contains(file.as_str()) && w.contains(&format!("`{model}`"))),
+            "{model}: no warning naming {file} and the model: {:?}",
+            warnings
+        );
+    }
+}
+
+/// OpenCV and mrcal, reading our exports, project `points` as we do (1e-6 px).
+fn assert_tools_project_like_us(
+    model: LensModel,
+    k: &Intrinsics,
+    points: &[[f64; 3]],
+    t: &serde_json::Value,
+    opencv: bool,
+    mrcal: bool,
+) {
+    for (tool, present) in [("opencv", opencv), ("mrcal", mrcal)] {
+        if !present {
+            assert!(
+                t[tool].is_null(),
+                "{model}: {tool} read a file that is not there"
+            );
+            continue;
+        }
+        let mut worst = 0.0f64;
+        for (i, p) in points.iter().enumerate() {
+            let ours = k.project(&Vector3::from(*p)).unwrap();
+            let (u, v) = (
+                t[tool][i][0].as_f64().unwrap(),
+                t[tool][i][1].as_f64().unwrap(),
+            );
+            let diff = (u - ours.x).abs().max((v - ours.y).abs());
+            worst = worst.max(diff);
+            assert!(
+                diff <= 1e-6,
+                "{model} {tool} point {i} {p:?}: ({u}, {v}) vs ({}, {})",
+                ours.x,
+                ours.y
             );
         }
+        eprintln!(
+            "{model} via {tool}: {} points, max projection difference {worst:.2e} px",
+            points.len()
+        );
     }
 }
 
