@@ -187,6 +187,14 @@ fn a_fisheye_taken_for_a_pinhole_fails_with_the_lens_hint() {
     );
     assert!(stderr(&run).lines().any(|l| l == hint), "{}", stderr(&run));
     assert!(stderr(&run).contains("\nhint: frames with the worst RMSE: frame "));
+    // The lens model that does fit gets no hint to change it, although a richer
+    // model (opencv8) fits the same corners a little better.
+    let rules = Rules { max_rmse_px: None };
+    assert_eq!(
+        guard::error_hints(&d, &request(Method::Standard), rules),
+        Vec::<String>::new()
+    );
+    assert!(!guard::error_hints(&as_radial3, &request(Method::Standard), rules).is_empty());
 }
 
 #[test]

@@ -113,8 +113,7 @@ pub fn judge(
     }
     // A rule on the data broke (not only convergence): look for the likely mistake.
     if reasons.len() > usize::from(!c.converged) {
-        hints.extend(swapped_hint(input, request, c.rmse_px, rules));
-        hints.extend(lens_hint(input, request, c.rmse_px, rules));
+        hints.extend(likely_mistakes(input, request, c.rmse_px, rules));
         hints.extend(worst_frames_hint(c, files));
     }
     Some(Failure { reasons, hints })
@@ -123,7 +122,17 @@ pub fn judge(
 /// Hints for a calibration of `input` that failed before it had a result
 /// (degenerate views, no initialisation): the same trials as for a failed result.
 pub fn error_hints(input: &Dataset, request: &Request, rules: Rules) -> Vec<String> {
-    let failed = f64::NAN;
+    likely_mistakes(input, request, f64::NAN, rules)
+}
+
+/// Hints that name a likely mistake (rows and cols swapped, the wrong lens model),
+/// each only when the user's own settings fail the rules on the trial's frames
+/// while the other reading passes them: a richer lens model that merely fits a
+/// little better is no sign of a mistake.
+fn likely_mistakes(input: &Dataset, request: &Request, failed: f64, rules: Rules) -> Vec<String> {
+    if trial(input, request, rules).is_some() {
+        return Vec::new();
+    }
     let mut hints = Vec::new();
     hints.extend(swapped_hint(input, request, failed, rules));
     hints.extend(lens_hint(input, request, failed, rules));
