@@ -260,6 +260,7 @@ fn held_out_error(
             .map(|&j| standard.state.frame_poses[j])
             .collect(),
         deformations: vec![Paraboloid::default(); frames],
+        higher_bends: vec![Default::default(); frames],
         corrections: trained.state.corrections.clone(),
     };
     let with_correction = trained.method.has_correction();
