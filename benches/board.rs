@@ -1,7 +1,8 @@
 //! The board-model experiments of issue 15 (beyond the paper), each printed as a
 //! table. `cargo bench --bench board -- <experiment>` with `prior` (the 50 × 25
 //! protocol on T1–T4 and a rigid board, with and without `static_prior_mm`),
-//! `order` (the `warped` preset: bend orders 2–4 and `auto`), `video` (the `flex`
+//! `order` (the `warped` preset: bend orders 2–4), `auto` (`bend_order = "auto"`
+//! on `warped` and T1–T4), `video` (the `flex`
 //! preset: temporal smoothness in time order and shuffled), `geometry` (a board
 //! measured on the 650-image reference loaded into 25-image `standard`
 //! calibrations) or `all`; `SUBSETS=n` shortens the protocol runs.
@@ -274,6 +275,57 @@ fn geometry() {
     println!("| {:.3} | {:.3} | {wins}/{} |", a / n, b / n, rows.len());
 }
 
+fn auto() {
+    use deformcal::model::selection::AutoSettings;
+    use deformcal::solver::select::calibrate_auto;
+    let seeds: Vec<u64> = (1..=subsets().min(10) as u64).collect();
+    println!(
+        "## bend_order = \"auto\" (method dynamic; 25 images, seeds {seeds:?}): methods chosen"
+    );
+    println!("| data | standard | dynamic | dynamic3 | dynamic4 |\n|---|---|---|---|---|");
+    for preset in [
+        Preset::Warped,
+        Preset::T1,
+        Preset::T2,
+        Preset::T3,
+        Preset::T4,
+    ] {
+        let candidates = vec![
+            Method::Standard,
+            Method::Dynamic,
+            Method::Dynamic3,
+            Method::Dynamic4,
+        ];
+        let chosen: Vec<Method> = seeds
+            .par_iter()
+            .map(|&seed| {
+                let (data, _) = Generator::new(preset, Some(25), seed).generate();
+                let auto = AutoSettings {
+                    candidates: candidates.clone(),
+                    ..AutoSettings::default()
+                };
+                let request = Request {
+                    method: Method::Dynamic,
+                    settings: SolverSettings::default(),
+                    gauge: None,
+                };
+                calibrate_auto(&data, &request, &auto, &|| {})
+                    .expect("auto")
+                    .method
+            })
+            .collect();
+        let count = |m: Method| chosen.iter().filter(|&&c| c == m).count();
+        println!(
+            "| {} | {} | {} | {} | {} |",
+            preset.name(),
+            count(Method::Standard),
+            count(Method::Dynamic),
+            count(Method::Dynamic3),
+            count(Method::Dynamic4)
+        );
+    }
+}
+
 fn main() {
     let which = std::env::args()
         .skip(1)
@@ -285,6 +337,9 @@ fn main() {
     }
     if all || which == "order" {
         order();
+    }
+    if all || which == "auto" {
+        auto();
     }
     if all || which == "video" {
         video();

@@ -153,7 +153,10 @@ fn bend_error(c: &Calibration, truth: &Truth) -> f64 {
 /// The dataset with frames reordered by a fixed permutation (j ↦ 37 j mod n).
 fn shuffled(data: &Dataset) -> Dataset {
     let n = data.num_frames();
-    assert!(n % 37 != 0, "37 must be coprime with the frame count");
+    assert!(
+        !n.is_multiple_of(37),
+        "37 must be coprime with the frame count"
+    );
     let mut out = data.clone();
     for o in &mut out.observations {
         o.frame = (37 * o.frame) % n;
@@ -322,4 +325,34 @@ fn a_geometry_of_another_board_is_refused() {
         e.contains("board.json") && e.contains("not a board.json"),
         "{e}"
     );
+}
+
+#[test]
+fn an_auto_bend_order_is_richer_on_a_warped_board_only() {
+    use deformcal::model::selection::AutoSettings;
+    use deformcal::solver::select::calibrate_auto;
+    let auto = AutoSettings {
+        candidates: vec![
+            Method::Standard,
+            Method::Dynamic,
+            Method::Dynamic3,
+            Method::Dynamic4,
+        ],
+        ..AutoSettings::default()
+    };
+    let request = Request {
+        method: Method::Dynamic,
+        settings: SolverSettings::default(),
+        gauge: None,
+    };
+    for (preset, expected) in [
+        (Preset::Warped, Method::Dynamic4),
+        (Preset::T2, Method::Dynamic),
+    ] {
+        let (data, _) = Generator::new(preset, Some(25), 1).generate();
+        let c = calibrate_auto(&data, &request, &auto, &|| {}).unwrap();
+        let reason = &c.selection.as_ref().unwrap().reason;
+        assert_eq!(c.method, expected, "{}: {reason}", preset.name());
+        assert!(reason.contains("G-AIC"), "{reason}");
+    }
 }
