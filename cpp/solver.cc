@@ -124,16 +124,20 @@ void ValidateLayout(const ffi::ProblemData& d) {
 template <class Board>
 void ValidatePriors(const ffi::ProblemData& d) {
   const size_t corners = kCorrectionStride * d.num_corners;
-  if (!d.correction_prior_weight.empty()) RequireSize(d.correction_prior_weight, corners, "correction_prior_weight");
-  if (!d.correction_prior_mean.empty()) RequireSize(d.correction_prior_mean, corners, "correction_prior_mean");
   const size_t extra = static_cast<size_t>(Board::kFrameExtra);
-  if (!d.bend_prior_weight.empty()) RequireSize(d.bend_prior_weight, extra, "bend_prior_weight");
-  if (!d.bend_smoothness_weight.empty()) RequireSize(d.bend_smoothness_weight, extra, "bend_smoothness_weight");
+  auto optional_size = [](const auto& v, size_t n, const char* name) {
+    if (!v.empty()) RequireSize(v, n, name);
+  };
+  optional_size(d.correction_prior_weight, corners, "correction_prior_weight");
+  optional_size(d.correction_prior_mean, corners, "correction_prior_mean");
+  optional_size(d.bend_prior_weight, extra, "bend_prior_weight");
+  optional_size(d.bend_smoothness_weight, extra, "bend_smoothness_weight");
   RequireFinite(d.correction_prior_mean, "correction_prior_mean");
   if (!(d.bend_smoothness_loss >= 0.0 && std::isfinite(d.bend_smoothness_loss))) {
     Fail("bend_smoothness_loss must be a non-negative number");
   }
-  for (const auto* w : {&d.correction_prior_weight, &d.bend_prior_weight, &d.bend_smoothness_weight}) {
+  for (const auto* w :
+       {&d.correction_prior_weight, &d.bend_prior_weight, &d.bend_smoothness_weight}) {
     RequireFinite(*w, "prior weight");
     for (double v : *w) {
       if (v < 0.0) Fail("prior weights must not be negative");

@@ -265,3 +265,38 @@ fn rust_and_cpp_board_registries_agree() {
     }
     assert!(bridge::board_model_sizes("wobbly").is_err());
 }
+
+#[test]
+fn malformed_priors_are_errors() {
+    let mut d = tiny("static");
+    d.correction_prior_weight = vec![1.0; 5];
+    assert!(error_of(&mut d, &options()).contains("correction_prior_weight"));
+    let mut d = tiny("dynamic4");
+    d.bend_smoothness_weight = vec![-1.0; 12];
+    assert!(error_of(&mut d, &options()).contains("must not be negative"));
+    let mut d = tiny("dynamic");
+    d.bend_smoothness_weight = vec![1.0; 3];
+    d.bend_smoothness_loss = f64::NAN;
+    assert!(error_of(&mut d, &options()).contains("bend_smoothness_loss"));
+}
+
+#[test]
+fn a_tight_bend_prior_holds_the_bend_and_the_smoothness_ties_frames() {
+    // Two frames, a 2×2 board seen head-on: a strong zero-mean prior keeps the
+    // bend at zero; a strong smoothness prior makes the two frames' bends equal.
+    let mut d = tiny("dynamic");
+    // Each frame's bend follows its pose; the frames follow the intrinsics (7)
+    // and camera 0's pose (6), 9 values each.
+    let (f0, f1) = (7 + 6 + 6, 7 + 6 + 9 + 6);
+    d.params[f0] = 1e-3;
+    d.params[f1] = -2e-3;
+    d.bend_prior_weight = vec![1e6; 3];
+    bridge::solve(&mut d, &options()).unwrap();
+    assert!(d.params[f0].abs() < 1e-9 && d.params[f1].abs() < 1e-9);
+    let mut d = tiny("dynamic");
+    d.params[f0] = 1e-3;
+    d.params[f1] = -2e-3;
+    d.bend_smoothness_weight = vec![1e6; 3];
+    bridge::solve(&mut d, &options()).unwrap();
+    assert!((d.params[f0] - d.params[f1]).abs() < 1e-9);
+}
