@@ -108,6 +108,51 @@ struct FullBoard {
   }
 };
 
+// Richer bends (beyond the paper): Δz = Σ c_k x^m y^n over every monomial with
+// 2 <= m + n <= Order (no constant or linear term: they would trade off against
+// the pose).  The first three coefficients are the paraboloid's (x², y², x y) in
+// its order, so an order-2 bend is exactly DynamicBoard's; then degree by degree,
+// within a degree by falling power of x (x³, x²y, x y², y³, x⁴, ..., y⁴).
+constexpr int BendTerms(int order) { return (order + 1) * (order + 2) / 2 - 3; }
+
+template <int Order, typename T>
+inline T PolynomialBend(const double* x, const T* c) {
+  T z = Paraboloid(x, c);
+  int k = kParaboloidSize;
+  for (int degree = 3; degree <= Order; ++degree) {
+    for (int m = degree; m >= 0; --m) {
+      double monomial = 1.0;
+      for (int i = 0; i < m; ++i) monomial *= x[0];
+      for (int i = 0; i < degree - m; ++i) monomial *= x[1];
+      z += c[k++] * monomial;
+    }
+  }
+  return z;
+}
+
+// The per-image polynomial bend of order 3 or 4, with (kInPlane) or without the
+// static in-plane correction of `full`: "dynamic3", "dynamic4", "full3", "full4".
+template <int Order, bool kInPlane>
+struct PolynomialBoard {
+  static_assert(Order == 3 || Order == 4, "orders 3 and 4 (order 2 is dynamic / full)");
+  static constexpr const char* kName =
+      kInPlane ? (Order == 3 ? "full3" : "full4") : (Order == 3 ? "dynamic3" : "dynamic4");
+  static constexpr int kGaugeCorners = kInPlane ? FullBoard::kGaugeCorners : 0;
+  static constexpr int kFrameExtra = BendTerms(Order);
+  static constexpr int kCornerSize = kInPlane ? FullBoard::kCornerSize : 0;
+
+  template <typename T>
+  static void Point(const double* x, const T* frame_extra, const T* corner, T* out) {
+    out[0] = kInPlane ? x[0] + corner[0] : T(x[0]);
+    out[1] = kInPlane ? x[1] + corner[1] : T(x[1]);
+    out[2] = x[2] + PolynomialBend<Order>(x, frame_extra);
+  }
+  static void FixGauge(ceres::Problem& problem, double* corrections,
+                       const std::vector<uint32_t>& gauge) {
+    if (kInPlane) FullBoard::FixGauge(problem, corrections, gauge);
+  }
+};
+
 // The board-model registry: DispatchBoard calls f with the model whose kName
 // matches, or returns false.
 template <class F>
@@ -123,6 +168,10 @@ bool DispatchBoard(const std::string& name, F&& f) {
   try_one(StaticBoard{});
   try_one(DynamicBoard{});
   try_one(FullBoard{});
+  try_one(PolynomialBoard<3, false>{});
+  try_one(PolynomialBoard<4, false>{});
+  try_one(PolynomialBoard<3, true>{});
+  try_one(PolynomialBoard<4, true>{});
   return found;
 }
 

@@ -21,6 +21,7 @@
 #include <utility>
 #include <vector>
 
+#include "deformcal/cpp/priors.h"
 #include "deformcal/cpp/residuals.h"
 #include "deformcal/src/solver/bridge.rs.h"
 
@@ -119,6 +120,31 @@ void ValidateLayout(const ffi::ProblemData& d) {
   RequireSize(d.params, next, "params");
 }
 
+// The priors' sizes (empty: no prior) and weights (finite, non-negative).
+template <class Board>
+void ValidatePriors(const ffi::ProblemData& d) {
+  const size_t corners = kCorrectionStride * d.num_corners;
+  const size_t extra = static_cast<size_t>(Board::kFrameExtra);
+  auto optional_size = [](const auto& v, size_t n, const char* name) {
+    if (!v.empty()) RequireSize(v, n, name);
+  };
+  optional_size(d.correction_prior_weight, corners, "correction_prior_weight");
+  optional_size(d.correction_prior_mean, corners, "correction_prior_mean");
+  optional_size(d.bend_prior_weight, extra, "bend_prior_weight");
+  optional_size(d.bend_smoothness_weight, extra, "bend_smoothness_weight");
+  RequireFinite(d.correction_prior_mean, "correction_prior_mean");
+  if (!(d.bend_smoothness_loss >= 0.0 && std::isfinite(d.bend_smoothness_loss))) {
+    Fail("bend_smoothness_loss must be a non-negative number");
+  }
+  for (const auto* w :
+       {&d.correction_prior_weight, &d.bend_prior_weight, &d.bend_smoothness_weight}) {
+    RequireFinite(*w, "prior weight");
+    for (double v : *w) {
+      if (v < 0.0) Fail("prior weights must not be negative");
+    }
+  }
+}
+
 // Everything that would otherwise trip a CHECK deep inside Ceres.
 template <class Board>
 void Validate(const ffi::ProblemData& d, const ffi::SolveOptions& o) {
@@ -162,6 +188,7 @@ void Validate(const ffi::ProblemData& d, const ffi::SolveOptions& o) {
   for (uint32_t c : d.frozen_corners) {
     if (c >= d.num_corners) Fail("frozen corner outside the board");
   }
+  ValidatePriors<Board>(d);
   if (o.loss == ffi::LossKind::Cauchy && !(o.loss_scale_px > 0.0 && std::isfinite(o.loss_scale_px))) {
     Fail("loss_scale_px must be a positive number");
   }
@@ -188,6 +215,9 @@ struct Assembled {
   std::vector<std::vector<uint32_t>> block_observations;
   std::vector<double*> frame_pose_blocks;
   std::vector<double*> correction_blocks;  // free corrections, none partly held
+  // The priors' residuals (priors.h): solved with, never reported as observations.
+  std::vector<ceres::ResidualBlockId> prior_residuals;
+  bool frames_linked = false;  // a prior ties frame blocks together (no Schur on frames)
 };
 
 // How residuals of one camera are made: its lens model chosen once per camera.
@@ -362,12 +392,57 @@ void AddResiduals(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params&
   if (kHasCorner) HoldCorrections<Board>(d, o, corner_used, p, a);
 }
 
+// The priors of priors.h on the free board-model parameters (off when the
+// problem data gives no weights): after the reprojection residuals, which decide
+// which blocks exist and which are held.
+template <class Board>
+void AddPriors(const ffi::ProblemData& d, Params& p, Assembled& a) {
+  ceres::Problem& problem = *a.problem;
+  constexpr int N = Board::kCornerSize, E = Board::kFrameExtra;
+  if constexpr (N > 0) {
+    const double zeros[kCorrectionStride] = {0.0, 0.0, 0.0};
+    for (uint32_t c = 0; c < d.num_corners && !d.correction_prior_weight.empty(); ++c) {
+      double* block = p.Correction(c);
+      if (!problem.HasParameterBlock(block) || problem.IsParameterBlockConstant(block)) continue;
+      const double* mean =
+          d.correction_prior_mean.empty() ? zeros : &d.correction_prior_mean[kCorrectionStride * c];
+      a.prior_residuals.push_back(problem.AddResidualBlock(
+          new CorrectionPrior<N>(mean, &d.correction_prior_weight[kCorrectionStride * c]), nullptr,
+          block));
+    }
+  }
+  if constexpr (E > 0) {
+    if (d.hold_deformations) return;
+    if (!d.bend_prior_weight.empty()) {
+      for (double* block : a.frame_pose_blocks) {
+        a.prior_residuals.push_back(
+            problem.AddResidualBlock(new BendPrior<E>(d.bend_prior_weight.data()), nullptr, block));
+      }
+    }
+    if (!d.bend_smoothness_weight.empty()) {
+      // Frames in index order are in time order; a frame no view kept is skipped.
+      for (size_t k = 1; k < a.frame_pose_blocks.size(); ++k) {
+        ceres::LossFunction* loss = d.bend_smoothness_loss > 0.0
+                                        ? new ceres::CauchyLoss(d.bend_smoothness_loss)
+                                        : nullptr;
+        a.prior_residuals.push_back(problem.AddResidualBlock(
+            new BendSmoothness<E>(d.bend_smoothness_weight.data()), loss,
+            a.frame_pose_blocks[k - 1], a.frame_pose_blocks[k]));
+        a.frames_linked = true;
+      }
+    }
+  }
+}
+
 Assembled Assemble(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params& p) {
   SilenceGlogOnce();
   Assembled a;
   a.problem = std::make_unique<ceres::Problem>();
   DispatchBoard(std::string(d.board_model),
-                [&](auto board) { AddResiduals<decltype(board)>(d, o, p, a); });
+                [&](auto board) {
+                  AddResiduals<decltype(board)>(d, o, p, a);
+                  AddPriors<decltype(board)>(d, p, a);
+                });
   return a;
 }
 
@@ -401,7 +476,13 @@ void ChooseLinearSolver(const Assembled& a, ceres::Solver::Options& s) {
 
   const int reduced_poses = total - free_poses;
   const int reduced_corrections = total - free_corrections;
-  const bool eliminate_corrections = free_corrections > 0 && reduced_corrections < reduced_poses;
+  const bool eliminate_corrections = free_corrections > 0 &&
+                                     (reduced_corrections < reduced_poses || a.frames_linked);
+  if (a.frames_linked && !eliminate_corrections) {
+    // Frame blocks tied by the smoothness prior are no independent set to eliminate.
+    s.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+    return;
+  }
   const std::vector<double*>& eliminated =
       eliminate_corrections ? a.correction_blocks : a.frame_pose_blocks;
   const int reduced = eliminate_corrections ? reduced_corrections : reduced_poses;

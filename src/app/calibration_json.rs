@@ -149,6 +149,10 @@ pub struct FrameJson {
     pub translation: [f64; 3],
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub deformation: Option<Paraboloid>,
+    /// The degree-3 and -4 bend coefficients (x³, x²y, xy², y³, x⁴, x³y, x²y², xy³,
+    /// y⁴; zero beyond the order) of `bend_order` 3 or 4.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub higher_bend: Option<Vec<f64>>,
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub max_out_of_plane_m: Option<f64>,
     #[serde(deserialize_with = "nan_if_null")]
@@ -310,7 +314,15 @@ impl From<&Calibration> for CalibrationJson {
                         rotation: pose.rotation,
                         translation: pose.translation,
                         deformation: bends.then_some(bend),
-                        max_out_of_plane_m: bends.then(|| bend.max_out_of_plane(&d.target)),
+                        higher_bend: (c.method.bend_order() > 2)
+                            .then(|| c.state.higher_bends[j].to_vec()),
+                        max_out_of_plane_m: bends.then(|| {
+                            crate::model::board::max_bend(
+                                &d.target,
+                                &bend,
+                                &c.state.higher_bends[j],
+                            )
+                        }),
                         rmse_px: if n[j] > 0 {
                             (sq[j] / n[j] as f64).sqrt()
                         } else {

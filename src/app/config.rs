@@ -1,6 +1,6 @@
 //! The TOML config (SPEC §5): typed, unknown keys rejected, values checked by key.
 use crate::error::{Error, Result};
-use crate::model::board::Method;
+use crate::model::board::{BoardGeometry, BoardPriors, Method};
 use crate::model::camera::CameraSpec;
 use crate::model::selection::{AutoSettings, MethodChoice};
 use crate::model::synthetic::{Preset, MAX_IMAGES};
@@ -44,7 +44,61 @@ pub struct CalibrationConfig {
     /// The largest RMSE a result may have, pixels; replaces the default guard
     /// rails on the RMSE (`app::guard`).
     pub max_rmse_px: Option<f64>,
+    /// 1σ of the board's print / flatness error, mm: a Gaussian prior on every
+    /// static correction value (off by default: the paper's model).
+    pub static_prior_mm: Option<f64>,
+    /// Order of the per-image polynomial bend of `dynamic` / `full` (2: the
+    /// paper's paraboloid), or `auto` (chosen by cross-validation).
+    pub bend_order: BendOrder,
+    /// 1σ of each bend term's out-of-plane reach at the board's corner, mm: a
+    /// zero-mean prior on the bend amplitudes (off by default).
+    pub bend_prior_mm: Option<f64>,
+    /// 1σ of each bend term's change between consecutive frames, mm at the
+    /// board's corner: temporal smoothness for video (off by default).
+    pub bend_smoothness: Option<f64>,
+    /// Frames bent more than this (mm, largest |Δz| over the corners) are flagged.
+    pub max_bend_mm: f64,
+    /// The measured board of `[target] geometry` (not a key of this section).
+    #[serde(skip)]
+    pub geometry: Option<std::sync::Arc<BoardGeometry>>,
 }
+
+/// `[calibration] bend_order`: 2, 3, 4 or "auto".
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(try_from = "RawBendOrder")]
+pub enum BendOrder {
+    /// A polynomial bend of this order.
+    Fixed(usize),
+    /// Orders 2 to 4 cross-validated against each other and `standard`.
+    Auto,
+}
+
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum RawBendOrder {
+    Number(i64),
+    Name(String),
+}
+
+impl TryFrom<RawBendOrder> for BendOrder {
+    type Error = String;
+    fn try_from(r: RawBendOrder) -> std::result::Result<Self, String> {
+        match r {
+            RawBendOrder::Number(n @ 2..=4) => Ok(BendOrder::Fixed(n as usize)),
+            RawBendOrder::Name(s) if s == "auto" => Ok(BendOrder::Auto),
+            RawBendOrder::Number(n) => {
+                Err(format!("bend_order must be 2, 3, 4 or \"auto\" (got {n})"))
+            }
+            RawBendOrder::Name(s) => Err(format!(
+                "bend_order must be 2, 3, 4 or \"auto\" (got \"{}\")",
+                short(&s)
+            )),
+        }
+    }
+}
+
+/// Default of `max_bend_mm`.
+pub const DEFAULT_MAX_BEND_MM: f64 = 5.0;
 
 impl Default for CalibrationConfig {
     fn default() -> Self {
@@ -68,6 +122,12 @@ impl Default for CalibrationConfig {
             outlier_k: s.outlier_k,
             detector_noise_px: None,
             max_rmse_px: None,
+            static_prior_mm: None,
+            bend_order: BendOrder::Fixed(2),
+            bend_prior_mm: None,
+            bend_smoothness: None,
+            max_bend_mm: DEFAULT_MAX_BEND_MM,
+            geometry: None,
         }
     }
 }
@@ -97,6 +157,14 @@ impl From<&CalibrationConfig> for SolverSettings {
             verbose: c.verbose,
             reference_jacobian: false,
             outlier_k: c.outlier_k,
+            board: BoardPriors {
+                static_sigma_m: c.static_prior_mm.map(|v| v * 1e-3),
+                bend_sigma_m: c.bend_prior_mm.map(|v| v * 1e-3),
+                smoothness_sigma_m: c.bend_smoothness.map(|v| v * 1e-3),
+                geometry: c.geometry.clone(),
+                noise_px: c.detector_noise_px,
+                max_bend_m: Some(c.max_bend_mm * 1e-3),
+            },
         }
     }
 }
@@ -196,6 +264,26 @@ impl TryFrom<RawProtocol> for ProtocolConfig {
     }
 }
 
+/// `[target]`: the board, and optionally a measured board (`board.json`).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawTarget {
+    rows: usize,
+    cols: usize,
+    spacing: f64,
+    geometry: Option<PathBuf>,
+}
+
+impl RawTarget {
+    fn target(&self) -> Target {
+        Target {
+            rows: self.rows,
+            cols: self.cols,
+            spacing: self.spacing,
+        }
+    }
+}
+
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawOutput {
@@ -205,7 +293,7 @@ struct RawOutput {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawConfig {
-    target: Option<Target>,
+    target: Option<RawTarget>,
     #[serde(default)]
     cameras: Vec<CameraSpec>,
     data: RawData,
@@ -270,6 +358,38 @@ pub struct Config {
     pub calibration: CalibrationConfig,
     pub protocol: Option<ProtocolConfig>,
     pub output_dir: PathBuf,
+}
+
+/// Applies `bend_order` to the methods with a bend: a fixed order replaces
+/// `dynamic` / `full` by the registry's model of that order (in `[protocol]` too);
+/// `auto` turns a fixed `dynamic` / `full` into `method = "auto"` over `standard`
+/// and that method's orders 2, 3 and 4.
+fn apply_bend_order(c: &mut CalibrationConfig, protocol: Option<&mut ProtocolConfig>) {
+    let order = match c.bend_order {
+        // The default: every method as named (`dynamic4` stays itself).
+        BendOrder::Fixed(2) => return,
+        BendOrder::Fixed(n) => n,
+        BendOrder::Auto => {
+            if let MethodChoice::Fixed(m) = c.method {
+                if m.bend_order() > 0 {
+                    c.method = MethodChoice::Auto;
+                    c.auto_candidates = std::iter::once(Method::Standard)
+                        .chain((2..=4).filter_map(|o| m.with_bend_order(o)))
+                        .collect();
+                }
+            }
+            return;
+        }
+    };
+    let apply = |m: Method| m.with_bend_order(order).unwrap_or(m);
+    if let MethodChoice::Fixed(m) = c.method {
+        c.method = MethodChoice::Fixed(apply(m));
+    }
+    if let Some(p) = protocol {
+        for m in &mut p.methods {
+            *m = apply(*m);
+        }
+    }
 }
 
 /// Seed of synthetic data when the config gives none.
@@ -507,6 +627,25 @@ impl Checker<'_> {
         Ok(())
     }
 
+    /// The board priors' σ: positive millimetres.
+    fn check_board_priors(&self, c: &CalibrationConfig) -> Result<()> {
+        for (key, v) in [
+            ("static_prior_mm", c.static_prior_mm),
+            ("bend_prior_mm", c.bend_prior_mm),
+            ("bend_smoothness", c.bend_smoothness),
+            ("max_bend_mm", Some(c.max_bend_mm)),
+        ] {
+            if let Some(v) = v {
+                if !(v.is_finite() && v > 0.0) {
+                    return Err(self.err(format!(
+                        "calibration.{key} must be a positive number of millimetres (got {v})"
+                    )));
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// `[protocol]`: sizes bounded before anything is allocated from them.
     fn check_protocol(&self, p: &ProtocolConfig) -> Result<()> {
         if !(1..=MAX_SUBSETS).contains(&p.subsets) {
@@ -674,7 +813,7 @@ impl Checker<'_> {
         Ok(())
     }
 
-    fn check(&self, raw: RawConfig) -> Result<Config> {
+    fn check(&self, mut raw: RawConfig) -> Result<Config> {
         let data = match raw.data.corners_vnl {
             _ if raw.data.photos.is_some() => self.photos(&raw.data)?,
             Some(vnl) => {
@@ -707,11 +846,16 @@ impl Checker<'_> {
         let (target, cameras) = match &data {
             DataSource::Synthetic {
                 preset, cameras: n, ..
-            } => self.synthetic_rig(preset, *n, raw.target.as_ref(), &raw.cameras)?,
+            } => self.synthetic_rig(
+                preset,
+                *n,
+                raw.target.as_ref().map(RawTarget::target).as_ref(),
+                &raw.cameras,
+            )?,
             DataSource::Observations(_)
             | DataSource::CornersVnl { .. }
             | DataSource::Photos { .. } => {
-                let t = raw.target.ok_or_else(|| {
+                let t = raw.target.as_ref().map(RawTarget::target).ok_or_else(|| {
                     self.err("the config needs a `[target]` section (rows, cols, spacing)".into())
                 })?;
                 if raw.cameras.is_empty() {
@@ -725,9 +869,16 @@ impl Checker<'_> {
         self.check_target("target", &target)?;
         self.check_camera_names(&cameras)?;
         self.check_camera_params(&cameras)?;
-        let reference = self.reference(raw.reference, target)?;
+        let reference = self.reference(raw.reference.take(), target)?;
         self.check_calibration(&raw.calibration, &target)?;
         self.check_solver_limits(&raw.calibration)?;
+        self.check_board_priors(&raw.calibration)?;
+        if let Some(path) = raw.target.as_ref().and_then(|t| t.geometry.clone()) {
+            let path = self.base.join(path);
+            let g = crate::app::board_json::read(&path, &target)?;
+            raw.calibration.geometry = Some(std::sync::Arc::new(g));
+        }
+        apply_bend_order(&mut raw.calibration, raw.protocol.as_mut());
         if let Some(p) = &raw.protocol {
             self.check_protocol(p)?;
         }

@@ -1,5 +1,6 @@
 //! The application layer: config, data files, photos and board detection, exports, the evaluation protocol,
 //! reports and plots, and the C API. Builds on the model and solver layers.
+pub mod board_json;
 pub mod calibration_json;
 pub mod capi;
 pub mod compare;

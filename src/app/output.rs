@@ -24,6 +24,7 @@ pub fn calibration_files() -> crate::app::fsio::Owns {
         matches!(
             name,
             "calibration.json"
+                | crate::app::board_json::BOARD_JSON
                 | FAILED_CALIBRATION
                 | FAILED_OUTLIERS
                 | "opencv.yaml"
@@ -56,6 +57,7 @@ pub fn write_calibration_labelled(
     let inputs = exports::optimization_inputs(c);
     let written = write_models(dir, &CalibrationJson::from(c), &inputs)?;
     write_atomic(&dir.join("outliers.csv"), &suspects_csv(c)?)?;
+    crate::app::board_json::write(dir, c)?;
     crate::app::uncertainty_plot::write_maps(dir, c)?;
     html_report::write_calibration_report(dir, c, labels)?;
     Ok(written)

@@ -610,12 +610,7 @@ impl Setup {
         }
         if row.method.has_paraboloid() {
             row.deformations = c.state.deformations.clone();
-            row.max_out_of_plane_m = c
-                .state
-                .deformations
-                .iter()
-                .map(|d| d.max_out_of_plane(&c.dataset.target))
-                .collect();
+            row.max_out_of_plane_m = c.frame_bends();
         }
         row
     }

@@ -240,8 +240,26 @@ fn write_rig(s: &mut String, c: &Calibration) {
     }
 }
 
+/// Board health: the frames bent beyond `max_bend_mm` or with residuals far above
+/// the rest (see `solver::health`).
+fn write_health(s: &mut String, c: &Calibration) {
+    let h = crate::solver::health::board_health(c, c.settings.board.max_bend_m);
+    let flagged: Vec<_> = h.flagged().collect();
+    if flagged.is_empty() {
+        return;
+    }
+    let _ = writeln!(s, "  board health: {} frame(s) flagged", flagged.len());
+    for f in flagged.iter().take(10) {
+        let _ = writeln!(s, "    frame {}: {}", f.frame, f.flags.join("; "));
+    }
+    if flagged.len() > 10 {
+        let _ = writeln!(s, "    … and {} more (see report.html)", flagged.len() - 10);
+    }
+}
+
 /// The board's bend and static correction, for the methods that estimate them.
 fn write_board(s: &mut String, c: &Calibration) {
+    write_health(s, c);
     if c.method.has_paraboloid() {
         let _ = writeln!(
             s,

@@ -232,6 +232,43 @@ pub fn choose(entries: &mut [(Candidate, Option<HeldOut>)]) -> Option<(usize, St
     Some((chosen, reason))
 }
 
+/// `bend_order = "auto"`: when the candidates hold several bend orders of one
+/// deformation (which the default candidates never do), the order is the one of
+/// lowest G-AIC among them (all fit the same observations, so their G-AIC
+/// compare; cross-validation with unbent held-out frames cannot see a better bend
+/// of the training frames). Returns the method and the reason; `None` otherwise.
+pub fn choose_bend_order(candidates: &[Candidate]) -> Option<(Method, String)> {
+    let bends: Vec<&Candidate> = candidates
+        .iter()
+        .filter(|c| c.method.bend_order() >= 2 && c.g_aic.is_some())
+        .collect();
+    let first = bends.first()?;
+    let family = first.method.has_correction();
+    if bends.iter().any(|c| c.method.has_correction() != family) || bends.len() < 2 {
+        return None;
+    }
+    let best = bends.iter().min_by(|a, b| {
+        a.g_aic
+            .partial_cmp(&b.g_aic)
+            .unwrap_or(std::cmp::Ordering::Equal)
+    })?;
+    let others: Vec<String> = bends
+        .iter()
+        .filter(|c| c.method != best.method)
+        .map(|c| format!("`{}` {:.1}", c.method, c.g_aic.unwrap_or(f64::NAN)))
+        .collect();
+    Some((
+        best.method,
+        format!(
+            "bend_order = \"auto\": `{}` (order {}) has the lowest G-AIC, {:.1} (vs {})",
+            best.method,
+            best.method.bend_order(),
+            best.g_aic.unwrap_or(f64::NAN),
+            others.join(", ")
+        ),
+    ))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

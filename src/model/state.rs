@@ -10,7 +10,7 @@
 //!
 //! [`Layout::pack`] and [`Layout::unpack`] are the only code that reads or writes
 //! this buffer on the Rust side; the C++ core takes the offsets and checks them.
-use crate::model::board::{Paraboloid, PARABOLOID_PARAMS};
+use crate::model::board::{HigherBend, Paraboloid, PARABOLOID_PARAMS};
 use crate::model::lens::{Intrinsics, LensModel};
 use crate::model::pose::Pose;
 use crate::model::target::Target;
@@ -31,6 +31,8 @@ pub struct State {
     pub frame_poses: Vec<Pose>,
     /// β_j per frame (zero where the method has none).
     pub deformations: Vec<Paraboloid>,
+    /// The degree-3 and -4 bend coefficients per frame (zero beyond the method's order).
+    pub higher_bends: Vec<HigherBend>,
     /// Δx_i per corner (zero where the method has none).
     pub corrections: Vec<[f64; 3]>,
 }
@@ -49,6 +51,7 @@ impl State {
             camera_poses,
             frame_poses,
             deformations: vec![Paraboloid::default(); frames],
+            higher_bends: vec![HigherBend::default(); frames],
             corrections: vec![[0.0; 3]; target.num_corners()],
         }
     }
@@ -112,6 +115,7 @@ impl Layout {
             && state.camera_poses.len() == self.lens_models.len()
             && state.frame_poses.len() == self.num_frames
             && state.deformations.len() == self.num_frames
+            && state.higher_bends.len() == self.num_frames
             && state.corrections.len() == self.num_corners
             && state
                 .intrinsics
@@ -129,9 +133,15 @@ impl Layout {
             out.extend_from_slice(&p.to_array());
         }
         let extra = self.frame_stride - POSE_PARAMS;
-        for (p, d) in state.frame_poses.iter().zip(&state.deformations) {
+        for ((p, d), h) in state
+            .frame_poses
+            .iter()
+            .zip(&state.deformations)
+            .zip(&state.higher_bends)
+        {
             out.extend_from_slice(&p.to_array());
-            out.extend_from_slice(&d.to_array()[..extra]);
+            let bend: Vec<f64> = d.to_array().into_iter().chain(*h).collect();
+            out.extend_from_slice(&bend[..extra]);
         }
         for c in &state.corrections {
             out.extend_from_slice(c);
@@ -164,13 +174,16 @@ impl Layout {
             .enumerate()
         {
             state.frame_poses[j] = Pose::from_slice(&chunk[..POSE_PARAMS]);
-            if self.frame_stride == POSE_PARAMS + PARABOLOID_PARAMS {
+            if self.frame_stride >= POSE_PARAMS + PARABOLOID_PARAMS {
                 let e = &chunk[POSE_PARAMS..];
                 state.deformations[j] = Paraboloid {
                     a: e[0],
                     b: e[1],
                     c: e[2],
                 };
+                let mut h = HigherBend::default();
+                h[..e.len() - PARABOLOID_PARAMS].copy_from_slice(&e[PARABOLOID_PARAMS..]);
+                state.higher_bends[j] = h;
             }
         }
         for (i, chunk) in buffer[self.corrections..]

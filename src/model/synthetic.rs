@@ -3,7 +3,7 @@
 //! Board sizes follow the paper's Fig. 3 caption, the per-image out-of-plane
 //! deformation magnitudes its Table S2 (mean ± std of the maximum Δz), the camera
 //! its Allied Vision MG-235B (1936×1216, 5.86 µm pixels) with a 17 mm lens.
-use crate::model::board::Paraboloid;
+use crate::model::board::{higher_dz, HigherBend, Paraboloid};
 use crate::model::camera::CameraSpec;
 use crate::model::dataset::Dataset;
 use crate::model::lens::{Intrinsics, LensModel};
@@ -31,6 +31,21 @@ pub enum Preset {
     Reference,
     /// T2 carried in front of a stereo pair 0.3 m apart.
     Stereo,
+    /// T2's board warped beyond a paraboloid: cubic and quartic terms and twist.
+    Warped,
+    /// A video of T2's board flexing slowly: the bend varies smoothly over 200 frames.
+    Flex,
+}
+
+/// How a preset's per-image bend is shaped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub enum BendShape {
+    /// The paper's paraboloid, a fresh random shape per image.
+    Paraboloid,
+    /// Paraboloid plus random cubic and quartic terms (twist included), per image.
+    Warped,
+    /// A paraboloid whose coefficients drift smoothly with the frame index (video).
+    Smooth,
 }
 
 /// What a preset generates.
@@ -51,11 +66,22 @@ pub struct PresetSpec {
     pub distance_m: [f64; 2],
     /// Detector noise per pixel coordinate.
     pub noise_px: f64,
+    /// The shape of the per-image bend.
+    pub bend_shape: BendShape,
 }
 
 impl Preset {
     /// Names accepted in configs.
-    pub const NAMES: [&'static str; 6] = ["t1", "t2", "t3", "t4", "reference", "stereo"];
+    pub const NAMES: [&'static str; 8] = [
+        "t1",
+        "t2",
+        "t3",
+        "t4",
+        "reference",
+        "stereo",
+        "warped",
+        "flex",
+    ];
 
     /// The config name.
     pub fn name(self) -> &'static str {
@@ -66,6 +92,8 @@ impl Preset {
             Preset::T4 => "t4",
             Preset::Reference => "reference",
             Preset::Stereo => "stereo",
+            Preset::Warped => "warped",
+            Preset::Flex => "flex",
         }
     }
 
@@ -78,6 +106,8 @@ impl Preset {
             Preset::T4,
             Preset::Reference,
             Preset::Stereo,
+            Preset::Warped,
+            Preset::Flex,
         ]
         .into_iter()
         .find(|p| p.name() == s)
@@ -99,6 +129,7 @@ impl Preset {
             sheet_offset_m: [0.0, 0.0],
             distance_m: [1.5, 6.0],
             noise_px: 0.15,
+            bend_shape: BendShape::Paraboloid,
         };
         match self {
             Preset::T1 => PresetSpec {
@@ -145,6 +176,20 @@ impl Preset {
             Preset::Reference => PresetSpec {
                 images: 650,
                 distance_m: [1.2, 4.0],
+                ..base
+            },
+            // Bends of a few millimetres, as T1's, but not paraboloids.
+            Preset::Warped => PresetSpec {
+                bend_mean_m: 3.0e-3,
+                bend_std_m: 1.0e-3,
+                bend_shape: BendShape::Warped,
+                ..base
+            },
+            Preset::Flex => PresetSpec {
+                images: 200,
+                bend_mean_m: 3.0e-3,
+                bend_std_m: 0.0,
+                bend_shape: BendShape::Smooth,
                 ..base
             },
         }
@@ -252,6 +297,9 @@ pub struct Truth {
     /// Camera-0-from-board per frame (dense order, frame ids 0..n).
     pub frame_poses: Vec<Pose>,
     pub deformations: Vec<Paraboloid>,
+    /// The degree-3 and -4 bend terms per frame (zero for the paper's presets).
+    #[serde(default)]
+    pub higher_bends: Vec<HigherBend>,
     /// The board's static deviation from the nominal grid, per corner.
     pub corrections: Vec<[f64; 3]>,
 }
@@ -262,7 +310,11 @@ impl Truth {
         let n = self.target.nominal(i);
         let c = self.corrections[i];
         let bend = self.deformations[j];
-        Vector3::new(n.x + c[0], n.y + c[1], c[2] + bend.dz(n.x, n.y))
+        let higher = self
+            .higher_bends
+            .get(j)
+            .map_or(0.0, |h| higher_dz(h, n.x, n.y));
+        Vector3::new(n.x + c[0], n.y + c[1], c[2] + bend.dz(n.x, n.y) + higher)
     }
 }
 
@@ -392,27 +444,52 @@ impl Generator {
         Pose::from_parts(&r, &centre)
     }
 
-    fn random_bend(&self, rng: &mut ChaCha8Rng) -> Paraboloid {
+    fn random_bend(&self, rng: &mut ChaCha8Rng, frame: usize) -> (Paraboloid, HigherBend) {
         let s = &self.spec;
         let magnitude =
             (s.bend_mean_m + s.bend_std_m * rng.sample::<f64, _>(rand_distr::StandardNormal)).abs()
                 * self.bend_scale;
         let n = Normal::new(0.0, 1.0).expect("unit normal");
-        let shape = Paraboloid {
+        let mut shape = Paraboloid {
             a: n.sample(rng),
             b: n.sample(rng),
             c: 0.5 * n.sample(rng),
         };
-        let unit = shape.max_out_of_plane(&s.target);
+        let mut higher = HigherBend::default();
+        match s.bend_shape {
+            BendShape::Paraboloid => {}
+            BendShape::Warped => {
+                // Coefficients in units of the board's half size, so every term
+                // reaches about as far as the paraboloid's; twist (x y, x³y, x y³) too.
+                let h = (s.target.cols.max(s.target.rows) as f64 - 1.0) / 2.0 * s.target.spacing;
+                for (k, c) in higher.iter_mut().enumerate() {
+                    let degree = if k < 4 { 3 } else { 4 };
+                    *c = 1.5 * n.sample(rng) / h.powi(degree - 2);
+                }
+                shape.c = n.sample(rng);
+            }
+            BendShape::Smooth => {
+                // Slow drifts, periods of 60 to 150 frames: a board flexing in the hands.
+                let t = frame as f64;
+                let tau = std::f64::consts::TAU;
+                shape = Paraboloid {
+                    a: (tau * t / 97.0).sin(),
+                    b: (tau * t / 150.0 + 1.0).cos(),
+                    c: 0.5 * (tau * t / 61.0 + 2.0).sin(),
+                };
+            }
+        }
+        let unit = crate::model::board::max_bend(&s.target, &shape, &higher);
         if unit < 1e-12 || magnitude == 0.0 {
-            return Paraboloid::default();
+            return (Paraboloid::default(), HigherBend::default());
         }
         let f = magnitude / unit;
-        Paraboloid {
+        let bend = Paraboloid {
             a: shape.a * f,
             b: shape.b * f,
             c: shape.c * f,
-        }
+        };
+        (bend, higher.map(|c| c * f))
     }
 
     /// The board's static deviation from the nominal grid per corner (print noise, sheet offset).
@@ -484,6 +561,7 @@ impl Generator {
             camera_poses: self.rig.clone(),
             frame_poses: Vec::with_capacity(self.images),
             deformations: Vec::with_capacity(self.images),
+            higher_bends: Vec::with_capacity(self.images),
             corrections,
         };
         let mut rows = Vec::new();
@@ -497,14 +575,16 @@ impl Generator {
             } else {
                 self.rig[anchor].inverse().compose(&held)
             };
-            let bend = self.random_bend(&mut rng);
+            let (bend, higher) = self.random_bend(&mut rng, truth.frame_poses.len());
             truth.deformations.push(bend);
+            truth.higher_bends.push(higher);
             truth.frame_poses.push(pose);
             let j = truth.frame_poses.len() - 1;
             let views = self.project_views(&cameras, &truth, j);
             if (views[anchor].len() as f64) < self.min_visible * corners {
                 truth.frame_poses.pop();
                 truth.deformations.pop();
+                truth.higher_bends.pop();
                 continue;
             }
             for (k, view) in views.into_iter().enumerate() {

@@ -51,6 +51,18 @@ pub mod ffi {
         hold_camera_poses: bool,
         hold_corrections: bool,
         hold_deformations: bool,
+        /// Prior on the static correction (`cpp/priors.h`): weight σ_noise/σ_prior
+        /// per correction value (3 per corner; empty: no prior, 0: none on that value).
+        correction_prior_weight: Vec<f64>,
+        /// The prior's mean, 3 per corner (empty: zero).
+        correction_prior_mean: Vec<f64>,
+        /// Zero-mean prior on each per-frame bend coefficient (empty: none).
+        bend_prior_weight: Vec<f64>,
+        /// Prior on the change of each bend coefficient from frame j−1 to j (empty: none).
+        bend_smoothness_weight: Vec<f64>,
+        /// Cauchy scale of the smoothness prior, pixels (0: Gaussian): a jump
+        /// between frames that are not consecutive in time costs little.
+        bend_smoothness_loss: f64,
     }
 
     /// Solver settings passed to Ceres.

@@ -236,7 +236,7 @@ fn rust_and_cpp_lens_registries_agree() {
 fn rust_and_cpp_board_registries_agree() {
     use crate::model::board::{board_point, Paraboloid};
     use nalgebra::Vector3;
-    for method in crate::Method::ALL {
+    for method in crate::Method::REGISTRY {
         let info = method.info();
         let sizes = bridge::board_model_sizes(info.name).unwrap();
         assert_eq!(
@@ -251,9 +251,11 @@ fn rust_and_cpp_board_registries_agree() {
             c: 0.2,
         };
         let correction = [1e-3, -2e-3, 5e-4];
-        let extra = &bend.to_array()[..info.frame_params];
+        let higher = [0.9, -0.4, 0.25, 0.6, -1.1, 0.3, 0.8, -0.2, 0.5];
+        let all: Vec<f64> = bend.to_array().into_iter().chain(higher).collect();
+        let extra = &all[..info.frame_params];
         let cpp = bridge::board_point(info.name, &nominal, extra, &correction).unwrap();
-        let rust = board_point(method, &Vector3::from(nominal), &correction, &bend);
+        let rust = board_point(method, &Vector3::from(nominal), &correction, &bend, &higher);
         for i in 0..3 {
             assert!(
                 (cpp[i] - rust[i]).abs() <= 1e-15,
@@ -262,4 +264,39 @@ fn rust_and_cpp_board_registries_agree() {
         }
     }
     assert!(bridge::board_model_sizes("wobbly").is_err());
+}
+
+#[test]
+fn malformed_priors_are_errors() {
+    let mut d = tiny("static");
+    d.correction_prior_weight = vec![1.0; 5];
+    assert!(error_of(&mut d, &options()).contains("correction_prior_weight"));
+    let mut d = tiny("dynamic4");
+    d.bend_smoothness_weight = vec![-1.0; 12];
+    assert!(error_of(&mut d, &options()).contains("must not be negative"));
+    let mut d = tiny("dynamic");
+    d.bend_smoothness_weight = vec![1.0; 3];
+    d.bend_smoothness_loss = f64::NAN;
+    assert!(error_of(&mut d, &options()).contains("bend_smoothness_loss"));
+}
+
+#[test]
+fn a_tight_bend_prior_holds_the_bend_and_the_smoothness_ties_frames() {
+    // Two frames, a 2×2 board seen head-on: a strong zero-mean prior keeps the
+    // bend at zero; a strong smoothness prior makes the two frames' bends equal.
+    let mut d = tiny("dynamic");
+    // Each frame's bend follows its pose; the frames follow the intrinsics (7)
+    // and camera 0's pose (6), 9 values each.
+    let (f0, f1) = (7 + 6 + 6, 7 + 6 + 9 + 6);
+    d.params[f0] = 1e-3;
+    d.params[f1] = -2e-3;
+    d.bend_prior_weight = vec![1e6; 3];
+    bridge::solve(&mut d, &options()).unwrap();
+    assert!(d.params[f0].abs() < 1e-9 && d.params[f1].abs() < 1e-9);
+    let mut d = tiny("dynamic");
+    d.params[f0] = 1e-3;
+    d.params[f1] = -2e-3;
+    d.bend_smoothness_weight = vec![1e6; 3];
+    bridge::solve(&mut d, &options()).unwrap();
+    assert!((d.params[f0] - d.params[f1]).abs() < 1e-9);
 }

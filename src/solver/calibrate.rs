@@ -163,11 +163,18 @@ impl Calibration {
 
     /// Largest per-image out-of-plane deformation.
     pub fn max_out_of_plane(&self) -> f64 {
+        self.frame_bends().into_iter().fold(0.0, f64::max)
+    }
+
+    /// Each frame's largest out-of-plane bend over the board's corners, metres.
+    pub fn frame_bends(&self) -> Vec<f64> {
+        let t = &self.dataset.target;
         self.state
             .deformations
             .iter()
-            .map(|d| d.max_out_of_plane(&self.dataset.target))
-            .fold(0.0, f64::max)
+            .zip(&self.state.higher_bends)
+            .map(|(d, h)| crate::model::board::max_bend(t, d, h))
+            .collect()
     }
 }
 
@@ -532,6 +539,7 @@ pub(crate) fn fit(dataset: &Dataset, request: &Request) -> Result<Calibration> {
     robust::check_stage(Method::Standard, &report, true)?;
     stages.push(Stage::new(Method::Standard, &report));
 
+    let request = &with_prior_noise(request, &dataset, &report.residuals);
     let (gauge, frozen, residuals) = if request.method == Method::Standard {
         (Vec::new(), Vec::new(), report.residuals)
     } else {
@@ -575,6 +583,19 @@ pub(crate) fn fit(dataset: &Dataset, request: &Request) -> Result<Calibration> {
         selection: None,
         covariance: Err(UncertaintyError::Jacobian("not computed".into())),
     })
+}
+
+/// The request with the noise that weights the board priors: the configured one,
+/// else estimated from `standard`'s residuals of neighbouring corners (which a
+/// smooth model error hardly touches, see `trust::noise_from_neighbours`).
+fn with_prior_noise(request: &Request, dataset: &Dataset, residuals: &[f64]) -> Request {
+    let mut r = request.clone();
+    if r.settings.board.any() && r.settings.board.noise_px.is_none() {
+        let noise = crate::model::trust::noise_from_neighbours(dataset, residuals)
+            .unwrap_or_else(|| rmse(residuals) / std::f64::consts::SQRT_2);
+        r.settings.board.noise_px = Some(noise);
+    }
+    r
 }
 
 /// What [`finish_robustly`] hands back: the data kept, their residuals, the frozen

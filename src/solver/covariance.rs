@@ -503,3 +503,60 @@ fn per_camera(
         })
         .collect()
 }
+
+/// The standard deviation of every static correction value at unit noise (3 per
+/// corner; 0 for a held value), from the same normal matrix as
+/// [`unit_covariance`]; `Err` when the problem has no free correction or when the
+/// corrections are the eliminated blocks (fewer values in the images' blocks than
+/// in the corners', so a dataset too small to measure a board anyway).
+pub fn unit_correction_std(
+    problem: &Problem,
+    state: &State,
+    settings: &SolverSettings,
+) -> Result<Vec<[f64; 3]>, UncertaintyError> {
+    let d = problem.dataset;
+    let layout = problem.layout();
+    let e = problem
+        .jacobian(state, settings)
+        .map_err(|e| UncertaintyError::Jacobian(e.to_string()))?;
+    let weights = loss_weights(d, settings, &e.residuals);
+    let mut n = normal_matrix(&e, &layout, &weights)?;
+    let targets: Vec<usize> = (0..n.params.len())
+        .filter(|&col| n.params[col] >= layout.corrections)
+        .collect();
+    if targets.is_empty()
+        || targets
+            .iter()
+            .any(|&c| !matches!(n.roles[c], Role::Kept(_)))
+    {
+        return Err(UncertaintyError::Jacobian(
+            "the corrections are not determined well enough for a covariance".into(),
+        ));
+    }
+    let scale = jacobi_scale(d, &layout, &mut n)?;
+    eliminate(d, &layout, &mut n)?;
+    let x = solve_columns(&n, &scale, &targets);
+    // Only the diagonal of the sandwich (WJX)ᵀ(WJX): one value per target.
+    let t = targets.len();
+    let mut var = vec![0.0; t];
+    let mut y = vec![0.0; t];
+    for r in 0..e.jacobian_rows {
+        y.iter_mut().for_each(|v| *v = 0.0);
+        for i in e.jacobian_row_ptr[r] as usize..e.jacobian_row_ptr[r + 1] as usize {
+            let (col, v) = (e.jacobian_col_idx[i] as usize, e.jacobian_values[i]);
+            for (u, yu) in y.iter_mut().enumerate() {
+                *yu += v * x[col * t + u];
+            }
+        }
+        let w2 = weights[r / 2] * weights[r / 2];
+        for (vu, yu) in var.iter_mut().zip(&y) {
+            *vu += w2 * yu * yu;
+        }
+    }
+    let mut out = vec![[0.0; 3]; d.target.num_corners()];
+    for (u, &col) in targets.iter().enumerate() {
+        let i = n.params[col] - layout.corrections;
+        out[i / CORRECTION_STRIDE][i % CORRECTION_STRIDE] = var[u].sqrt();
+    }
+    Ok(out)
+}

@@ -4,6 +4,7 @@
 mod bridge;
 pub mod calibrate;
 pub mod covariance;
+pub mod health;
 pub mod problem;
 pub mod residuals;
 pub mod robust;

@@ -1,7 +1,7 @@
 //! Problem assembly: turns a dataset, a method and a parameter state into the
 //! Ceres problem behind the bridge, and the solution back into typed values.
 use crate::error::{Error, Result};
-use crate::model::board::Method;
+use crate::model::board::{BoardPriors, Method};
 use crate::model::dataset::Dataset;
 use crate::model::lens::LensModel;
 use crate::model::state::Layout;
@@ -49,6 +49,8 @@ pub struct SolverSettings {
     /// Outlier rejection threshold in noise standard deviations (0: off); see
     /// `calibrate::reject_outliers`.
     pub outlier_k: f64,
+    /// Priors on the board model and a measured board (all off by default).
+    pub board: BoardPriors,
 }
 
 impl Default for SolverSettings {
@@ -65,6 +67,7 @@ impl Default for SolverSettings {
             verbose: false,
             reference_jacobian: false,
             outlier_k: 4.0,
+            board: BoardPriors::default(),
         }
     }
 }
@@ -215,7 +218,12 @@ impl Problem<'_> {
         )
     }
 
-    fn data(&self, state: &State, layout: &Layout) -> Result<ProblemData> {
+    fn data(
+        &self,
+        state: &State,
+        layout: &Layout,
+        settings: &SolverSettings,
+    ) -> Result<ProblemData> {
         let d = self.dataset;
         let t = d.target;
         let params = layout
@@ -228,8 +236,9 @@ impl Problem<'_> {
             num_cameras: d.cameras.len(),
             num_frames: d.num_frames(),
             num_corners: t.num_corners(),
-            board: t
-                .nominal_points()
+            board: settings
+                .board
+                .board_points(&t)
                 .iter()
                 .flat_map(|p| [p.x, p.y, p.z])
                 .collect(),
@@ -256,6 +265,7 @@ impl Problem<'_> {
             hold_camera_poses: self.hold.camera_poses,
             hold_corrections: self.hold.corrections,
             hold_deformations: self.hold.deformations,
+            ..self.priors(settings)
         };
         for o in &d.observations {
             data.obs_camera.push(o.camera as u32);
@@ -269,10 +279,32 @@ impl Problem<'_> {
         Ok(data)
     }
 
+    /// The priors' part of the problem data (`cpp/priors.h`; empty where off).
+    fn priors(&self, settings: &SolverSettings) -> ProblemData {
+        let b = &settings.board;
+        let t = self.dataset.target;
+        let info = self.method.info();
+        let mut d = ProblemData::default();
+        if b.noise_px.is_none() || !b.any() {
+            return d;
+        }
+        if info.corner_params > 0 {
+            d.correction_prior_weight = b.correction_weights(t.num_corners());
+        }
+        if info.frame_params > 0 {
+            d.bend_prior_weight = b.bend_weights(&t, info.frame_params, b.bend_sigma_m);
+            d.bend_smoothness_weight = b.bend_weights(&t, info.frame_params, b.smoothness_sigma_m);
+            // Robust: a change of more than about 1σ (shuffled stills, a cut in
+            // the video) is not pulled towards its neighbour.
+            d.bend_smoothness_loss = b.noise_px.unwrap_or(0.0);
+        }
+        d
+    }
+
     /// Refines `state` in place; an unusable solve is an error, a non-converged one is reported.
     pub fn solve(&self, state: &mut State, settings: &SolverSettings) -> Result<SolveReport> {
         let layout = self.layout();
-        let mut data = self.data(state, &layout)?;
+        let mut data = self.data(state, &layout, settings)?;
         let mut report = ffi::solve(&mut data, &settings.options())
             .map_err(|e| Error::Problem(e.what().to_string()))?;
         if !report.usable {
@@ -294,7 +326,7 @@ impl Problem<'_> {
         settings: &SolverSettings,
         with_jacobian: bool,
     ) -> Result<Evaluation> {
-        let data = self.data(state, &self.layout())?;
+        let data = self.data(state, &self.layout(), settings)?;
         let mut e = ffi::evaluate(&data, &settings.options(), with_jacobian)
             .map_err(|e| Error::Problem(e.what().to_string()))?;
         self.unweight(&mut e.residuals);
@@ -305,7 +337,7 @@ impl Problem<'_> {
     /// observation order (two per observation), and the residuals in pixels (weights
     /// undone). The same numbers as [`Problem::evaluate`]'s, several times faster; `cost` is NaN.
     pub fn jacobian(&self, state: &State, settings: &SolverSettings) -> Result<Evaluation> {
-        let data = self.data(state, &self.layout())?;
+        let data = self.data(state, &self.layout(), settings)?;
         let j = ffi::jacobian(&data, &settings.options())
             .map_err(|e| Error::Problem(e.what().to_string()))?;
         let mut e = Evaluation {

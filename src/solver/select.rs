@@ -96,7 +96,11 @@ pub fn calibrate_auto(
         .collect();
     let (chosen_at, reason) = selection::choose(&mut entries)
         .ok_or_else(|| Error::Degenerate("no candidate method could be cross-validated".into()))?;
-    let chosen = entries[chosen_at].0.method;
+    let candidates: Vec<Candidate> = entries.iter().map(|(c, _)| c.clone()).collect();
+    let (chosen, reason) = match selection::choose_bend_order(&candidates) {
+        Some((m, why)) => (m, format!("{why}; cross-validation alone: {reason}")),
+        None => (entries[chosen_at].0.method, reason),
+    };
     let standard_intrinsics = standard.state.intrinsics.clone();
     let (_, result) = fits
         .into_iter()
@@ -260,6 +264,7 @@ fn held_out_error(
             .map(|&j| standard.state.frame_poses[j])
             .collect(),
         deformations: vec![Paraboloid::default(); frames],
+        higher_bends: vec![Default::default(); frames],
         corrections: trained.state.corrections.clone(),
     };
     let with_correction = trained.method.has_correction();

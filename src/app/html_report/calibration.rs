@@ -512,9 +512,9 @@ fn board_section(c: &Calibration) -> Result<String> {
         return Ok(para(
             "The `standard` method models a rigid, flat board: it estimates no static correction and no bend. \
              If the bias ratio above is large, compare with `dynamic` or `full`.",
-        ));
+        ) + &health_block(c));
     }
-    let mut s = String::new();
+    let mut s = health_block(c);
     if c.method.has_correction() {
         s.push_str(&subsection(
             "static-correction",
@@ -530,6 +530,44 @@ fn board_section(c: &Calibration) -> Result<String> {
         ));
     }
     Ok(s)
+}
+
+/// Board health: the frames flagged for a bend over `max_bend_mm` or residuals far
+/// above the other frames' (`solver::health`).
+fn health_block(c: &Calibration) -> String {
+    let h = crate::solver::health::board_health(c, c.settings.board.max_bend_m);
+    let rows: Vec<Vec<String>> = h
+        .flagged()
+        .map(|f| {
+            vec![
+                f.frame.to_string(),
+                format!("{:.3}", f.max_bend_m * 1e3),
+                format!("{:.4}", f.rmse_px),
+                escape(&f.flags.join("; ")),
+            ]
+        })
+        .collect();
+    let intro = format!(
+        "Board health: frames are flagged when their largest bend exceeds max_bend_mm = {:.2} mm \
+         or their RMSE exceeds {}× the median frame's ({:.4} px).",
+        h.max_bend_m * 1e3,
+        crate::solver::health::RMSE_FACTOR,
+        h.median_rmse_px
+    );
+    if rows.is_empty() {
+        return subsection(
+            "board-health",
+            "Board health",
+            &para(&format!("{intro} No frame is flagged.")),
+        );
+    }
+    let head = ["frame", "max |Δz| (mm)", "RMSE (px)", "why"].map(String::from);
+    subsection(
+        "board-health",
+        "Board health",
+        &(para(&format!("{intro} {} frame(s) are flagged:", rows.len()))
+            + &page::table_html(&head, &rows)),
+    )
 }
 
 /// The static correction map and what it shows.
@@ -571,12 +609,7 @@ fn correction_block(c: &Calibration) -> Result<String> {
 /// The bends along the sequence and the worst frame's bend surface.
 fn bends_block(c: &Calibration) -> Result<String> {
     let t = &c.dataset.target;
-    let max: Vec<f64> = c
-        .state
-        .deformations
-        .iter()
-        .map(|b| b.max_out_of_plane(t))
-        .collect();
+    let max: Vec<f64> = c.frame_bends();
     let worst = (0..max.len())
         .max_by(|&a, &b| max[a].total_cmp(&max[b]))
         .unwrap_or(0);
@@ -651,7 +684,10 @@ fn frames_section(c: &Calibration, stats: &[ViewResidual], labels: &FrameLabels)
                     format!("{:.4}", b.a * 1e3),
                     format!("{:.4}", b.b * 1e3),
                     format!("{:.4}", b.c * 1e3),
-                    format!("{:.4}", b.max_out_of_plane(t) * 1e3),
+                    format!(
+                        "{:.4}",
+                        crate::model::board::max_bend(t, &b, &c.state.higher_bends[v.frame]) * 1e3
+                    ),
                 ]);
             }
             row

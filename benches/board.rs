@@ -1,0 +1,350 @@
+//! The board-model experiments of issue 15 (beyond the paper), each printed as a
+//! table. `cargo bench --bench board -- <experiment>` with `prior` (the 50 × 25
+//! protocol on T1–T4 and a rigid board, with and without `static_prior_mm`),
+//! `order` (the `warped` preset: bend orders 2–4), `auto` (`bend_order = "auto"`
+//! on `warped` and T1–T4), `video` (the `flex`
+//! preset: temporal smoothness in time order and shuffled), `geometry` (a board
+//! measured on the 650-image reference loaded into 25-image `standard`
+//! calibrations) or `all`; `SUBSETS=n` shortens the protocol runs.
+use deformcal::app::config::{Config, ProtocolConfig};
+use deformcal::app::protocol::prepare;
+use deformcal::model::board::{BoardGeometry, Method};
+use deformcal::model::metrics::mapping_error;
+use deformcal::model::synthetic::{Generator, Preset, Truth};
+use deformcal::solver::problem::SolverSettings;
+use deformcal::{calibrate, Calibration, Dataset, Request};
+use rayon::prelude::*;
+use std::path::Path;
+use std::sync::Arc;
+
+fn subsets() -> usize {
+    std::env::var("SUBSETS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(50)
+}
+
+/// Mean truth mapping error per method of a protocol run on `preset` (bend scaled).
+fn protocol(preset: &str, extra: &str, bend_scale: f64) -> Vec<(Method, f64, f64, usize)> {
+    let text = format!("[data]\nsynthetic = \"{preset}\"\n[calibration]\n{extra}\n");
+    let config = Config::parse(&text, Path::new("bench.toml")).expect("bench config");
+    let p = ProtocolConfig {
+        subsets: subsets(),
+        ..ProtocolConfig::default()
+    };
+    let mut setup = prepare(&config, &p).expect("setup");
+    if bend_scale != 1.0 {
+        let mut g = Generator::new(Preset::parse(preset).unwrap(), None, 1);
+        g.bend_scale = bend_scale;
+        setup.dataset = g.generate().0;
+    }
+    let rows = setup.run(None, &|| {});
+    Method::ALL
+        .iter()
+        .map(|&m| {
+            let e: Vec<f64> = rows
+                .iter()
+                .filter(|r| r.method == m && r.ok())
+                .filter_map(|r| r.cameras[0].truth_mapping_error_px)
+                .collect();
+            let n = e.len() as f64;
+            let mean = e.iter().sum::<f64>() / n;
+            let std = (e.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+            (m, mean, std, e.len())
+        })
+        .collect()
+}
+
+fn prior() {
+    println!(
+        "## static prior: truth mapping error (px), {} × 25 protocol",
+        subsets()
+    );
+    println!(
+        "| target | prior | standard | static | dynamic | full | static/standard | full/dynamic |"
+    );
+    println!("|---|---|---|---|---|---|---|---|");
+    for (name, preset, scale) in [
+        ("T1", "t1", 1.0),
+        ("T2", "t2", 1.0),
+        ("T3", "t3", 1.0),
+        ("T4", "t4", 1.0),
+        ("rigid (T2 board, no bend)", "t2", 0.0),
+    ] {
+        let prior = std::env::var("PRIOR").unwrap_or_else(|_| "0.1".into());
+        for extra in [String::new(), format!("static_prior_mm = {prior}")] {
+            let r = protocol(preset, &extra, scale);
+            let cell = |i: usize| format!("{:.3} ± {:.3}", r[i].1, r[i].2);
+            println!(
+                "| {name} | {} | {} | {} | {} | {} | {:.2} | {:.2} |",
+                if extra.is_empty() {
+                    "none".into()
+                } else {
+                    format!("{prior} mm")
+                },
+                cell(0),
+                cell(1),
+                cell(2),
+                cell(3),
+                r[1].1 / r[0].1,
+                r[3].1 / r[2].1
+            );
+        }
+    }
+}
+
+fn run(data: &Dataset, method: Method, settings: &SolverSettings) -> Calibration {
+    let request = Request {
+        method,
+        settings: settings.clone(),
+        gauge: None,
+    };
+    calibrate(data, &request).unwrap_or_else(|e| panic!("{method}: {e}"))
+}
+
+fn truth_error(c: &Calibration, truth: &Truth) -> f64 {
+    let cam = &c.dataset.cameras[0];
+    mapping_error(
+        &truth.intrinsics[0],
+        &c.state.intrinsics[0],
+        cam.width,
+        cam.height,
+    )
+}
+
+/// RMS over frames and corners of the estimated bend's Δz minus the truth's, metres.
+fn bend_error(c: &Calibration, truth: &Truth) -> f64 {
+    use deformcal::model::board::higher_dz;
+    let t = c.dataset.target;
+    let mut sq = 0.0;
+    let mut n = 0.0;
+    for (j, &f) in c.dataset.frame_ids.iter().enumerate() {
+        let (d, h) = (c.state.deformations[j], c.state.higher_bends[j]);
+        let f = f as usize;
+        let (td, th) = (truth.deformations[f], truth.higher_bends[f]);
+        for p in t.nominal_points() {
+            let e = d.dz(p.x, p.y) + higher_dz(&h, p.x, p.y);
+            let g = td.dz(p.x, p.y) + higher_dz(&th, p.x, p.y);
+            sq += (e - g).powi(2);
+            n += 1.0;
+        }
+    }
+    (sq / n).sqrt()
+}
+
+fn order() {
+    let seeds: Vec<u64> = (1..=subsets().min(10) as u64).collect();
+    println!("## bend order on `warped` (25 images, seeds {seeds:?}): truth mapping error (px)");
+    println!("| data | rigid floor | standard | dynamic | dynamic3 | dynamic4 | full4 |");
+    println!("|---|---|---|---|---|---|---|");
+    for preset in [Preset::Warped, Preset::T2] {
+        let rows: Vec<Vec<f64>> = seeds
+            .par_iter()
+            .map(|&seed| {
+                let (data, truth) = Generator::new(preset, Some(25), seed).generate();
+                let mut g = Generator::new(preset, Some(25), seed);
+                g.bend_scale = 0.0;
+                let (rigid, rigid_truth) = g.generate();
+                let s = SolverSettings::default();
+                let mut out = vec![truth_error(
+                    &run(&rigid, Method::Standard, &s),
+                    &rigid_truth,
+                )];
+                for m in [
+                    Method::Standard,
+                    Method::Dynamic,
+                    Method::Dynamic3,
+                    Method::Dynamic4,
+                    Method::Full4,
+                ] {
+                    out.push(truth_error(&run(&data, m, &s), &truth));
+                }
+                out
+            })
+            .collect();
+        let mean = |i: usize| rows.iter().map(|r| r[i]).sum::<f64>() / rows.len() as f64;
+        println!(
+            "| {} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} |",
+            preset.name(),
+            mean(0),
+            mean(1),
+            mean(2),
+            mean(3),
+            mean(4),
+            mean(5)
+        );
+    }
+}
+
+/// The dataset with its frames in a seeded random order (frame ids permuted).
+fn shuffled(data: &Dataset, seed: u64) -> Dataset {
+    use rand::seq::SliceRandom;
+    use rand::SeedableRng;
+    let n = data.num_frames();
+    let mut perm: Vec<usize> = (0..n).collect();
+    perm.shuffle(&mut rand_chacha::ChaCha8Rng::seed_from_u64(seed));
+    let mut out = data.clone();
+    for o in &mut out.observations {
+        o.frame = perm[o.frame];
+    }
+    out.frame_ids = (0..n)
+        .map(|j| data.frame_ids[perm.iter().position(|&p| p == j).unwrap()])
+        .collect();
+    out.observations
+        .sort_by_key(|o| (o.frame, o.camera, o.corner));
+    out
+}
+
+fn smoothness_levels() -> Vec<Option<f64>> {
+    let mut v = vec![None];
+    v.extend(
+        std::env::var("SMOOTH")
+            .unwrap_or_else(|_| "0.3".into())
+            .split(',')
+            .filter_map(|s| s.parse().ok())
+            .map(Some),
+    );
+    v
+}
+
+fn video() {
+    println!("## temporal smoothness on `flex` (200 frames): dynamic, truth mapping error (px) and bend error (mm RMS)");
+    println!("| seed | order | smoothness | mapping | mapping (rot) | bend |");
+    println!("|---|---|---|---|---|---|");
+    for seed in 1..=3u64 {
+        let (data, truth) = Generator::new(Preset::Flex, None, seed).generate();
+        for (label, d) in [("time", data.clone()), ("shuffled", shuffled(&data, seed))] {
+            for sm in smoothness_levels() {
+                let mut s = SolverSettings::default();
+                s.board.smoothness_sigma_m = sm.map(|v| v * 1e-3);
+                let c = run(&d, Method::Dynamic, &s);
+                let cam = &c.dataset.cameras[0];
+                let rot = deformcal::model::metrics::mapping_error_rot(
+                    &truth.intrinsics[0],
+                    &c.state.intrinsics[0],
+                    cam.width,
+                    cam.height,
+                );
+                println!(
+                    "| {seed} | {label} | {} | {:.4} | {rot:.4} | {:.4} |",
+                    sm.map_or("off".into(), |v| format!("{v} mm")),
+                    truth_error(&c, &truth),
+                    bend_error(&c, &truth) * 1e3
+                );
+            }
+        }
+    }
+}
+
+fn geometry() {
+    println!("## a board measured on the 650-image reference, loaded into 25-image `standard`");
+    let (reference, _) = Generator::new(Preset::Reference, None, 1).generate();
+    let s = SolverSettings::default();
+    let measured = run(&reference, Method::Static, &s);
+    let json = deformcal::app::board_json::of(&measured).expect("static measures the board");
+    let geometry = Arc::new(BoardGeometry {
+        target: reference.target,
+        correction: json.correction.clone(),
+        correction_std: json.correction_std.clone().unwrap_or_default(),
+    });
+    // T2's board is the reference's: the same seed draws the same print error.
+    let (t2, truth) = Generator::new(Preset::T2, None, 1).generate();
+    let seeds: Vec<u64> = (1..=subsets() as u64).collect();
+    let rows: Vec<(f64, f64)> = seeds
+        .par_iter()
+        .map(|&seed| {
+            use rand::seq::index::sample;
+            use rand::SeedableRng;
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+            let mut frames = sample(&mut rng, t2.num_frames(), 25).into_vec();
+            frames.sort_unstable();
+            let data = t2.subset(&frames);
+            let plain = truth_error(&run(&data, Method::Standard, &s), &truth);
+            let mut with = s.clone();
+            with.board.geometry = Some(geometry.clone());
+            (
+                plain,
+                truth_error(&run(&data, Method::Standard, &with), &truth),
+            )
+        })
+        .collect();
+    let n = rows.len() as f64;
+    let (a, b) = rows.iter().fold((0.0, 0.0), |(x, y), r| (x + r.0, y + r.1));
+    let wins = rows.iter().filter(|r| r.1 < r.0).count();
+    println!("| standard | standard + board.json | better in |\n|---|---|---|");
+    println!("| {:.3} | {:.3} | {wins}/{} |", a / n, b / n, rows.len());
+}
+
+fn auto() {
+    use deformcal::model::selection::AutoSettings;
+    use deformcal::solver::select::calibrate_auto;
+    let seeds: Vec<u64> = (1..=subsets().min(10) as u64).collect();
+    println!(
+        "## bend_order = \"auto\" (method dynamic; 25 images, seeds {seeds:?}): methods chosen"
+    );
+    println!("| data | standard | dynamic | dynamic3 | dynamic4 |\n|---|---|---|---|---|");
+    for preset in [
+        Preset::Warped,
+        Preset::T1,
+        Preset::T2,
+        Preset::T3,
+        Preset::T4,
+    ] {
+        let candidates = vec![
+            Method::Standard,
+            Method::Dynamic,
+            Method::Dynamic3,
+            Method::Dynamic4,
+        ];
+        let chosen: Vec<Method> = seeds
+            .par_iter()
+            .map(|&seed| {
+                let (data, _) = Generator::new(preset, Some(25), seed).generate();
+                let auto = AutoSettings {
+                    candidates: candidates.clone(),
+                    ..AutoSettings::default()
+                };
+                let request = Request {
+                    method: Method::Dynamic,
+                    settings: SolverSettings::default(),
+                    gauge: None,
+                };
+                calibrate_auto(&data, &request, &auto, &|| {})
+                    .expect("auto")
+                    .method
+            })
+            .collect();
+        let count = |m: Method| chosen.iter().filter(|&&c| c == m).count();
+        println!(
+            "| {} | {} | {} | {} | {} |",
+            preset.name(),
+            count(Method::Standard),
+            count(Method::Dynamic),
+            count(Method::Dynamic3),
+            count(Method::Dynamic4)
+        );
+    }
+}
+
+fn main() {
+    let which = std::env::args()
+        .skip(1)
+        .find(|a| !a.starts_with('-'))
+        .unwrap_or_else(|| "all".into());
+    let all = which == "all";
+    if all || which == "prior" {
+        prior();
+    }
+    if all || which == "order" {
+        order();
+    }
+    if all || which == "auto" {
+        auto();
+    }
+    if all || which == "video" {
+        video();
+    }
+    if all || which == "geometry" {
+        geometry();
+    }
+}

@@ -1,0 +1,87 @@
+// Gaussian priors on the board model's parameters (beyond the paper, SPEC 2): extra
+// residuals on top of the gauge the parameterisation fixes, never instead of it.
+//
+// Each prior is a whitened difference r = w (value - mean), w = sigma_noise /
+// sigma_prior, so that its squared residual sits on the same pixel scale as the
+// reprojection residuals.  The functors are linear with constant Jacobians and
+// know nothing of the problem assembly; solver.cc adds them after the
+// reprojection residuals, and keeps them out of the residuals it reports.
+#pragma once
+
+#include <ceres/sized_cost_function.h>
+
+#include <array>
+
+#include "deformcal/cpp/camera.h"
+
+namespace deformcal {
+
+// The prior on one corner's static correction (its N estimated values).
+template <int N>
+class CorrectionPrior : public ceres::SizedCostFunction<N, N> {
+ public:
+  CorrectionPrior(const double* mean, const double* weight) {
+    for (int k = 0; k < N; ++k) {
+      mean_[k] = mean[k];
+      weight_[k] = weight[k];
+    }
+  }
+  bool Evaluate(double const* const* p, double* r, double** jacobians) const override {
+    for (int k = 0; k < N; ++k) r[k] = weight_[k] * (p[0][k] - mean_[k]);
+    if (jacobians != nullptr && jacobians[0] != nullptr) {
+      for (int k = 0; k < N * N; ++k) jacobians[0][k] = 0.0;
+      for (int k = 0; k < N; ++k) jacobians[0][k * N + k] = weight_[k];
+    }
+    return true;
+  }
+
+ private:
+  std::array<double, N> mean_, weight_;
+};
+
+// The zero-mean prior on one image's bend coefficients (the E values after the
+// pose in the frame's block): an amplitude prior.
+template <int E>
+class BendPrior : public ceres::SizedCostFunction<E, kPoseSize + E> {
+ public:
+  explicit BendPrior(const double* weight) {
+    for (int k = 0; k < E; ++k) weight_[k] = weight[k];
+  }
+  bool Evaluate(double const* const* p, double* r, double** jacobians) const override {
+    for (int k = 0; k < E; ++k) r[k] = weight_[k] * p[0][kPoseSize + k];
+    if (jacobians != nullptr && jacobians[0] != nullptr) {
+      for (int k = 0; k < E * (kPoseSize + E); ++k) jacobians[0][k] = 0.0;
+      for (int k = 0; k < E; ++k) jacobians[0][k * (kPoseSize + E) + kPoseSize + k] = weight_[k];
+    }
+    return true;
+  }
+
+ private:
+  std::array<double, E> weight_;
+};
+
+// Temporal smoothness: image j's bend coefficients tied to image j-1's, for
+// frames in time order (a slowly flexing board bends alike in consecutive frames).
+template <int E>
+class BendSmoothness : public ceres::SizedCostFunction<E, kPoseSize + E, kPoseSize + E> {
+ public:
+  explicit BendSmoothness(const double* weight) {
+    for (int k = 0; k < E; ++k) weight_[k] = weight[k];
+  }
+  bool Evaluate(double const* const* p, double* r, double** jacobians) const override {
+    for (int k = 0; k < E; ++k) r[k] = weight_[k] * (p[1][kPoseSize + k] - p[0][kPoseSize + k]);
+    for (int b = 0; b < 2; ++b) {
+      if (jacobians == nullptr || jacobians[b] == nullptr) continue;
+      for (int k = 0; k < E * (kPoseSize + E); ++k) jacobians[b][k] = 0.0;
+      for (int k = 0; k < E; ++k) {
+        jacobians[b][k * (kPoseSize + E) + kPoseSize + k] = b == 0 ? -weight_[k] : weight_[k];
+      }
+    }
+    return true;
+  }
+
+ private:
+  std::array<double, E> weight_;
+};
+
+}  // namespace deformcal

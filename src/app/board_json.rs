@@ -1,0 +1,137 @@
+//! `board.json`: a board measured once (its static correction and that
+//! correction's standard deviation), written beside `calibration.json` by every
+//! calibration that estimates a correction and read back by `[target] geometry`
+//! as the nominal board of later calibrations. Only this module reads or writes
+//! the file; what a calibration does with the geometry is `model::board`'s
+//! `BoardPriors`.
+use crate::app::fsio::{read_limited, write_atomic};
+use crate::error::{Error, Result};
+use crate::model::board::BoardGeometry;
+use crate::model::target::Target;
+use crate::solver::calibrate::Calibration;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// The file's name beside `calibration.json`.
+pub const BOARD_JSON: &str = "board.json";
+/// The `format` tag that marks the file.
+pub const FORMAT: &str = "deformcal-board";
+/// Largest `board.json` read (a 1000 × 1000 board is about 100 MB).
+const MAX_BYTES: u64 = 256 << 20;
+
+/// The file's contents.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BoardJson {
+    pub format: String,
+    pub version: u32,
+    /// The method that measured the board.
+    pub method: String,
+    pub rows: usize,
+    pub cols: usize,
+    pub spacing: f64,
+    /// Images the measurement used.
+    pub images: usize,
+    /// The corners whose correction fixed the gauge (their σ is 0).
+    pub gauge_corners: Vec<usize>,
+    /// Δx, Δy, Δz per corner in metres, relative to the nominal grid.
+    pub correction: Vec<[f64; 3]>,
+    /// 1σ of each correction value in metres (the diagonal of its covariance,
+    /// σ̂²(JᵀJ)⁻¹ with the gauge fixed); absent when the data could not give it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub correction_std: Option<Vec<[f64; 3]>>,
+}
+
+/// The board a calibration measured, if its method estimates a correction:
+/// its correction on top of the geometry it started from, and that correction's σ.
+pub fn of(c: &Calibration) -> Option<BoardJson> {
+    if !c.method.has_correction() {
+        return None;
+    }
+    let t = c.dataset.target;
+    let base = c.settings.board.geometry.as_ref();
+    let correction = c
+        .state
+        .corrections
+        .iter()
+        .enumerate()
+        .map(|(i, d)| {
+            let g = base.map(|g| g.correction[i]).unwrap_or([0.0; 3]);
+            [g[0] + d[0], g[1] + d[1], g[2] + d[2]]
+        })
+        .collect();
+    let noise = c.trust(c.detector_noise_px).map(|t| t.noise_px);
+    let correction_std = noise.and_then(|noise| {
+        let unit =
+            crate::solver::covariance::unit_correction_std(&c.problem(), &c.state, &c.settings)
+                .ok()?;
+        Some(unit.iter().map(|s| s.map(|v| v * noise)).collect())
+    });
+    Some(BoardJson {
+        format: FORMAT.into(),
+        version: 1,
+        method: c.method.name().into(),
+        rows: t.rows,
+        cols: t.cols,
+        spacing: t.spacing,
+        images: c.dataset.num_frames(),
+        gauge_corners: c.gauge.clone(),
+        correction,
+        correction_std,
+    })
+}
+
+/// Writes `board.json` into `dir` when the calibration measured the board.
+pub fn write(dir: &Path, c: &Calibration) -> Result<()> {
+    if let Some(b) = of(c) {
+        let text = serde_json::to_string_pretty(&b).expect("board serialises");
+        write_atomic(&dir.join(BOARD_JSON), text.as_bytes())?;
+    }
+    Ok(())
+}
+
+/// Reads a `board.json` for a calibration of board `target`: refused unless it is
+/// one, of the same board, with a finite correction per corner.
+pub fn read(path: &Path, target: &Target) -> Result<BoardGeometry> {
+    let err = |message: String| Error::Config {
+        path: path.into(),
+        message,
+    };
+    let bytes = read_limited(path, MAX_BYTES)?;
+    let b: BoardJson =
+        serde_json::from_slice(&bytes).map_err(|e| err(format!("not a board.json ({e})")))?;
+    if b.format != FORMAT || b.version != 1 {
+        return Err(err(format!(
+            "format `{}` version {} is not `{FORMAT}` version 1",
+            b.format, b.version
+        )));
+    }
+    if (b.rows, b.cols) != (target.rows, target.cols)
+        || (b.spacing - target.spacing).abs() > 1e-9 * target.spacing.abs().max(1.0)
+    {
+        return Err(err(format!(
+            "measures a {} × {} board of spacing {} m, but [target] is {} × {} of {} m",
+            b.rows, b.cols, b.spacing, target.rows, target.cols, target.spacing
+        )));
+    }
+    let n = target.num_corners();
+    let std = b.correction_std.clone().unwrap_or_default();
+    if b.correction.len() != n || !(std.is_empty() || std.len() == n) {
+        return Err(err(format!(
+            "has {} corrections and {} deviations; the board has {n} corners",
+            b.correction.len(),
+            std.len()
+        )));
+    }
+    let finite = |v: &[[f64; 3]]| v.iter().flatten().all(|x| x.is_finite());
+    if !finite(&b.correction) || !finite(&std) || std.iter().flatten().any(|&s| s < 0.0) {
+        return Err(err(
+            "correction and correction_std must be finite (σ non-negative)".into(),
+        ));
+    }
+    Ok(BoardGeometry {
+        target: *target,
+        correction: b.correction,
+        correction_std: std,
+    })
+}
