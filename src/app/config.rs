@@ -166,6 +166,7 @@ struct RawConfig {
     #[serde(default)]
     calibration: CalibrationConfig,
     protocol: Option<ProtocolConfig>,
+    sfm: Option<crate::app::sfm::SfmConfig>,
     output: Option<RawOutput>,
 }
 
@@ -222,6 +223,8 @@ pub struct Config {
     pub reference: Option<ReferenceConfig>,
     pub calibration: CalibrationConfig,
     pub protocol: Option<ProtocolConfig>,
+    /// `[sfm]`: the structure-from-motion loop-closure experiment (`app::sfm`).
+    pub sfm: Option<crate::app::sfm::SfmConfig>,
     pub output_dir: PathBuf,
 }
 
@@ -684,6 +687,9 @@ impl Checker<'_> {
         if let Some(p) = &raw.protocol {
             self.check_protocol(p)?;
         }
+        if let Some(s) = &raw.sfm {
+            s.check().map_err(|m| self.err(m))?;
+        }
         self.check_camera_patterns(&data, &cameras)?;
         if let DataSource::Photos { patterns, .. } = &data {
             self.check_photo_cameras(patterns, &cameras)?;
@@ -700,6 +706,7 @@ impl Checker<'_> {
             reference,
             calibration: raw.calibration,
             protocol: raw.protocol,
+            sfm: raw.sfm,
             output_dir,
         })
     }
