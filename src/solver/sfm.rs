@@ -19,6 +19,9 @@ use nalgebra::Vector3;
 pub struct SfmSettings {
     /// Frames in the sliding bundle-adjustment window (the newest ones).
     pub window: usize,
+    /// Frames before the window whose views of the window's points join the
+    /// adjustment, held: they anchor the points.
+    pub history: usize,
     /// Cauchy loss scale, pixels (0: plain least squares).
     pub loss_scale_px: f64,
     /// Ceres iterations per window adjustment.
@@ -31,6 +34,7 @@ impl Default for SfmSettings {
     fn default() -> Self {
         SfmSettings {
             window: 8,
+            history: 8,
             loss_scale_px: 2.0,
             max_iterations: 4,
             min_parallax_deg: 1.0,
@@ -195,10 +199,13 @@ impl<'a> Sfm<'a> {
                     continue;
                 };
                 // A pose-only fit needs only the frame's own views (the rest are
-                // constant); a window takes held views up to one window further
-                // back: enough to anchor its points, few enough to stay fast.
-                let oldest =
-                    frames[0].saturating_sub(if points_held { 0 } else { self.settings.window });
+                // constant); a window takes held views up to `history` frames
+                // further back: enough to anchor its points, few enough to stay fast.
+                let oldest = frames[0].saturating_sub(if points_held {
+                    0
+                } else {
+                    self.settings.history
+                });
                 if j < oldest || j > *frames.last().expect("frames") {
                     continue;
                 }
