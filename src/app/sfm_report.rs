@@ -80,13 +80,16 @@ pub fn sfm_table(h: &Header, rows: &[Row]) -> Option<Table> {
     })
 }
 
+/// One method's dots: its name, colour and (mapping error, loop closure) points.
+type Scatter = (String, RGBColor, Vec<(f64, f64)>);
+
 /// `loop_closure.svg`: loop-closure error against mapping error, one dot per
 /// subset, a colour per method; `None` without `[sfm]` results.
 pub fn sfm_plot(h: &Header, rows: &[Row]) -> Result<Option<String>> {
     if !has_sfm(rows) {
         return Ok(None);
     }
-    let series: Vec<(String, RGBColor, Vec<(f64, f64)>)> = h
+    let series: Vec<Scatter> = h
         .methods
         .iter()
         .enumerate()

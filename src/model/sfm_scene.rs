@@ -161,7 +161,7 @@ pub fn generate(camera: &Intrinsics, width: u32, height: u32, s: &SceneSettings)
     // The track each point continues in the previous frame, if it was detected there.
     let mut open: Vec<Option<usize>> = vec![None; points.len()];
     let mut num_tracks = 0;
-    for j in 0..=s.frames {
+    for (j, pose) in poses.iter().enumerate() {
         let mut now: Vec<Option<usize>> = vec![None; points.len()];
         let frame: Vec<Feature> = if j == s.frames {
             // The closing frame is the first image again: the same features, matched
@@ -171,7 +171,6 @@ pub fn generate(camera: &Intrinsics, width: u32, height: u32, s: &SceneSettings)
                 .map(|f| Feature { frame: j, ..*f })
                 .collect()
         } else {
-            let pose = &poses[j];
             let centre = pose.inverse().translation_vector();
             (0..points.len())
                 .filter_map(|i| {
