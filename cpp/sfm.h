@@ -91,7 +91,8 @@ BundleReport solve_bundle(BundleData& d) {
     using Lens = decltype(lens);
     if (d.intrinsics.size() != static_cast<size_t>(Lens::kNumParams)) Fail("intrinsics size");
     for (size_t i = 0; i < d.obs_frame.size(); ++i) {
-      auto* cost = new BundleResidual<Lens>(d.intrinsics.data(), d.obs_uv[2 * i], d.obs_uv[2 * i + 1]);
+      auto* cost =
+          new BundleResidual<Lens>(d.intrinsics.data(), d.obs_uv[2 * i], d.obs_uv[2 * i + 1]);
       problem.AddResidualBlock(cost, loss, d.poses.data() + kPoseSize * d.obs_frame[i],
                                d.points.data() + 3 * d.obs_point[i]);
     }
