@@ -615,6 +615,18 @@ fn print_summary(summary: &deformcal::app::protocol_report::Summary) {
             );
         }
     }
+    // The [sfm] experiment's figure (the paper's Table 1), where the run had one.
+    let loops: Vec<String> = h
+        .methods
+        .iter()
+        .filter_map(|m| {
+            let x = summary.methods[m.name()].metrics.get("loop_closure_px")?;
+            Some(format!("{m} {:.2} ± {:.2}", x.mean, x.std))
+        })
+        .collect();
+    if !loops.is_empty() {
+        println!("  SfM loop-closure error (px): {}", loops.join(", "));
+    }
 }
 
 fn run_protocol(args: ProtocolArgs) -> Result<()> {
