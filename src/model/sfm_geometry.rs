@@ -207,8 +207,12 @@ mod tests {
             .map(|x| (cam.project(&p.transform(x)).unwrap(), *x))
             .collect();
         assert!(loop_closure_rmse(&cam, &p, &feats).unwrap() < 1e-9);
-        let mut q = p;
-        q.rotation[1] += 1e-3; // 1 mrad: about fx · 1e-3 ≈ 2.9 px
+        // The camera turned by 1 mrad about its y axis: about fx · 1e-3 ≈ 2.9 px.
+        let turn = Pose {
+            rotation: [0.0, 1e-3, 0.0],
+            translation: [0.0; 3],
+        };
+        let q = turn.compose(&p);
         let e = loop_closure_rmse(&cam, &q, &feats).unwrap();
         assert!((e - 2.9).abs() < 0.2, "{e}");
         assert!(loop_closure_rmse(&cam, &p, &[]).is_none());
