@@ -44,6 +44,7 @@ fn main() {
         "cpp/board.h",
         "cpp/camera.h",
         "cpp/solver.cc",
+        "cpp/sfm.h",
     ] {
         println!("cargo:rerun-if-changed={f}");
     }

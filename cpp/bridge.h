@@ -16,6 +16,8 @@ struct ProblemData;
 struct SolveOptions;
 struct SolveReport;
 struct Evaluation;
+struct BundleData;
+struct BundleReport;
 
 // Builds the Ceres problem for data.board_model, solves it and writes the refined
 // parameters back into data.  Invalid input throws (a Rust Err), never aborts.
@@ -45,6 +47,9 @@ struct Jacobian {
 
 // Evaluates the Jacobian directly from the cost functions (see DirectJacobian).
 std::unique_ptr<Jacobian> jacobian(const ProblemData& data, const SolveOptions& options);
+
+// A bundle adjustment with the intrinsics held (sfm.h); poses and points in place.
+BundleReport solve_bundle(BundleData& data);
 
 // The C++ registries, exposed so that a test can check them against Rust's.
 size_t lens_num_params(rust::Str model);

@@ -822,3 +822,6 @@ rust::Vec<double> board_point(rust::Str model, rust::Slice<const double> nominal
 
 }  // namespace ffi
 }  // namespace deformcal
+
+// The structure-from-motion bundle adjustment: its own functor, kept apart.
+#include "deformcal/cpp/sfm.h"

@@ -44,6 +44,23 @@ enum Command {
     Detect(DetectArgs),
     /// Compare two calibration.json files: mapping error between them beside their uncertainty.
     Compare(CompareArgs),
+    /// Structure from motion around a synthetic building with a calibration's
+    /// intrinsics held: its loop-closure error, and the scene in COLMAP's text format.
+    Sfm(SfmArgs),
+}
+
+#[derive(Args, Debug)]
+struct SfmArgs {
+    /// The TOML config: its [sfm] section (defaults otherwise) and the true camera
+    /// (its synthetic data's truth, or its [reference] set's calibration).
+    #[arg(long, short)]
+    config: PathBuf,
+    /// The calibration.json whose first camera's intrinsics to test.
+    #[arg(long)]
+    calibration: PathBuf,
+    /// Folder for sfm.json and the COLMAP files (default: the config's output dir + /sfm).
+    #[arg(long)]
+    output: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]
@@ -432,6 +449,65 @@ fn run_compare(args: CompareArgs) -> Result<()> {
     Ok(())
 }
 
+fn run_sfm(args: SfmArgs) -> Result<()> {
+    use deformcal::app::calibration_json::CalibrationJson;
+    use deformcal::app::{exports, sfm};
+    let config = Config::load(&args.config)?;
+    let json = CalibrationJson::load(&args.calibration)?;
+    if json.cameras.is_empty() || config.cameras.is_empty() {
+        anyhow::bail!("{}: no camera to test", args.calibration.display());
+    }
+    let (cam, spec) = (&json.cameras[0], &config.cameras[0]);
+    if (cam.width, cam.height) != (spec.width, spec.height) {
+        anyhow::bail!(
+            "{}: camera `{}` is {}×{} but the config's first camera is {}×{}",
+            args.calibration.display(),
+            cam.name,
+            cam.width,
+            cam.height,
+            spec.width,
+            spec.height
+        );
+    }
+    let exp = protocol::sfm_for_config(&config)?;
+    let tested = exp
+        .run(&cam.intrinsics)
+        .with_context(|| format!("structure from motion with {}", args.calibration.display()))?;
+    let truth = exp.run(&exp.true_camera)?;
+    let dir = args.output.unwrap_or_else(|| config.output_dir.join("sfm"));
+    std::fs::create_dir_all(&dir).with_context(|| dir.display().to_string())?;
+    let mut summary = exp.summary_json(&tested);
+    summary["loop_closure_px_true_camera"] = truth.loop_closure_px.into();
+    let mut warnings = Vec::new();
+    let (images, points) = sfm::colmap_scene(&exp.scene);
+    let mut files = vec![
+        ("sfm.json", serde_json::to_string_pretty(&summary)?),
+        ("images.txt", images),
+        ("points3D.txt", points),
+        ("match_pairs.txt", sfm::match_pairs(&exp.scene)),
+    ];
+    if let Some(c) = exports::cameras_txt(&json, &mut warnings) {
+        files.push((exports::COLMAP_FILE, c));
+    }
+    for (name, text) in &files {
+        fsio::write_atomic(&dir.join(name), text.as_bytes())?;
+    }
+    for w in warnings {
+        eprintln!("warning: {w}");
+    }
+    println!(
+        "loop-closure error: {:.3} px over {} features of the first image ({} frames); \
+         with the true camera: {:.3} px\nwritten: sfm.json and COLMAP's cameras.txt, images.txt, \
+         points3D.txt, match_pairs.txt in {}",
+        tested.loop_closure_px,
+        tested.loop_points,
+        exp.scene.num_frames(),
+        truth.loop_closure_px,
+        dir.display()
+    );
+    Ok(())
+}
+
 fn run_export(args: ExportArgs) -> Result<()> {
     let json = deformcal::app::calibration_json::CalibrationJson::load(&args.calibration)?;
     let set = OutputSet::begin(&args.output, output::calibration_files())?;
@@ -547,6 +623,18 @@ fn print_summary(summary: &deformcal::app::protocol_report::Summary) {
             .map(|(m, n)| format!("{m} {n}×"))
             .collect();
         println!("  auto chose: {}", choices.join(", "));
+    }
+    // The [sfm] experiment's figure (the paper's Table 1), where the run had one.
+    let loops: Vec<String> = h
+        .methods
+        .iter()
+        .filter_map(|m| {
+            let x = summary.methods[m.name()].metrics.get("loop_closure_px")?;
+            Some(format!("{m} {:.2} ± {:.2}", x.mean, x.std))
+        })
+        .collect();
+    if !loops.is_empty() {
+        println!("  SfM loop-closure error (px): {}", loops.join(", "));
     }
 }
 
@@ -739,6 +827,7 @@ fn main() -> ExitCode {
         Some(Command::Batch(a)) => run_batch(a),
         Some(Command::Detect(a)) => run_detect(a),
         Some(Command::Compare(a)) => run_compare(a),
+        Some(Command::Sfm(a)) => run_sfm(a),
         None => run_default(cli.calibrate),
     };
     match result {

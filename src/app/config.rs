@@ -301,6 +301,7 @@ struct RawConfig {
     #[serde(default)]
     calibration: CalibrationConfig,
     protocol: Option<ProtocolConfig>,
+    sfm: Option<crate::app::sfm::SfmConfig>,
     output: Option<RawOutput>,
 }
 
@@ -357,6 +358,8 @@ pub struct Config {
     pub reference: Option<ReferenceConfig>,
     pub calibration: CalibrationConfig,
     pub protocol: Option<ProtocolConfig>,
+    /// `[sfm]`: the structure-from-motion loop-closure experiment (`app::sfm`).
+    pub sfm: Option<crate::app::sfm::SfmConfig>,
     pub output_dir: PathBuf,
 }
 
@@ -882,6 +885,9 @@ impl Checker<'_> {
         if let Some(p) = &raw.protocol {
             self.check_protocol(p)?;
         }
+        if let Some(s) = &raw.sfm {
+            s.check().map_err(|m| self.err(m))?;
+        }
         self.check_camera_patterns(&data, &cameras)?;
         if let DataSource::Photos { patterns, .. } = &data {
             self.check_photo_cameras(patterns, &cameras)?;
@@ -898,6 +904,7 @@ impl Checker<'_> {
             reference,
             calibration: raw.calibration,
             protocol: raw.protocol,
+            sfm: raw.sfm,
             output_dir,
         })
     }

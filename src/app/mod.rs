@@ -20,5 +20,7 @@ pub mod plots;
 pub mod protocol;
 pub mod protocol_report;
 pub mod report;
+pub mod sfm;
+pub mod sfm_report;
 pub mod source;
 pub mod uncertainty_plot;

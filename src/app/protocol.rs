@@ -2,6 +2,7 @@
 //! reproducible subsets, every subset × method calibrated and measured, in parallel,
 //! sharded if asked.
 use crate::app::config::{Config, ProtocolConfig};
+use crate::app::sfm::{Experiment, SfmConfig};
 use crate::error::{Error, Result};
 use crate::model::board::{Method, Paraboloid};
 use crate::model::camera::CameraSpec;
@@ -199,6 +200,13 @@ pub struct Row {
     /// `auto`'s evidence and reason (its rows only, when the choice succeeded).
     #[serde(default)]
     pub selection: Option<Selection>,
+    /// The structure-from-motion loop-closure error of camera 0's intrinsics,
+    /// pixels (`[sfm]`; the paper's Table 1).
+    #[serde(default)]
+    pub loop_closure_px: Option<f64>,
+    /// Why the reconstruction with this calibration broke off, if it did.
+    #[serde(default)]
+    pub sfm_error: Option<String>,
 }
 
 /// One camera's results in a [`Row`].
@@ -343,6 +351,8 @@ pub struct Setup {
     /// `[calibration] detector_noise_px`: σ̂ of the bias ratio and the uncertainty
     /// (estimated per subset when `None`).
     pub detector_noise_px: Option<f64>,
+    /// `[sfm]`: the scene every calibration reconstructs.
+    pub sfm: Option<Experiment>,
 }
 
 /// Loads the data, runs the reference calibration and draws the subsets.
@@ -414,6 +424,15 @@ pub fn prepare(config: &Config, protocol: &ProtocolConfig) -> Result<Setup> {
             }
         }),
     };
+    let sfm = match &config.sfm {
+        None => None,
+        Some(s) => Some(sfm_experiment(
+            s,
+            &header,
+            truth.as_ref(),
+            reference.as_ref(),
+        )?),
+    };
     Ok(Setup {
         header,
         dataset,
@@ -423,7 +442,48 @@ pub fn prepare(config: &Config, protocol: &ProtocolConfig) -> Result<Setup> {
         settings,
         warnings,
         detector_noise_px: config.calibration.detector_noise_px,
+        sfm,
     })
+}
+
+/// The scene of `[sfm]`, seen by camera 0's true intrinsics: the truth of
+/// synthetic data, else the reference calibration (as the paper's reference
+/// stands in for the truth in its mapping error).
+pub fn sfm_experiment(
+    s: &SfmConfig,
+    header: &Header,
+    truth: Option<&Truth>,
+    reference: Option<&Calibration>,
+) -> Result<Experiment> {
+    let camera = truth
+        .map(|t| t.intrinsics[0])
+        .or_else(|| reference.map(|r| r.state.intrinsics[0]))
+        .ok_or_else(|| {
+            Error::Invalid(
+                "[sfm] needs a camera to see the scene with: synthetic data (its true camera) or a                  [reference] set (its calibration)"
+                    .into(),
+            )
+        })?;
+    let cam = &header.cameras[0];
+    Experiment::new(s, &camera, cam.width, cam.height)
+}
+
+/// The whole `[sfm]` set-up of a config for `deformcal sfm`: its data's truth or
+/// its reference calibration, without drawing subsets.
+pub fn sfm_for_config(config: &Config) -> Result<Experiment> {
+    let protocol = ProtocolConfig {
+        subsets: 1,
+        images_per_subset: crate::solver::calibrate::MIN_IMAGES,
+        ..ProtocolConfig::default()
+    };
+    let with_sfm = Config {
+        sfm: Some(config.sfm.clone().unwrap_or_default()),
+        ..config.clone()
+    };
+    let setup = prepare(&with_sfm, &protocol)?;
+    setup
+        .sfm
+        .ok_or_else(|| Error::Invalid("no [sfm] scene".into()))
 }
 
 fn dataset_name(config: &Config) -> String {
@@ -565,6 +625,8 @@ impl Setup {
             bias_ratio: None,
             auto,
             selection: None,
+            loop_closure_px: None,
+            sfm_error: None,
         };
         let request = Request {
             method,
@@ -607,6 +669,12 @@ impl Setup {
             let u = uncertainty.as_ref().and_then(|u| u.get(k));
             let camera = self.camera_row(&c, k, u, &mut row.error);
             row.cameras.push(camera);
+        }
+        if let Some(e) = &self.sfm {
+            match e.run(&c.state.intrinsics[0]) {
+                Ok(r) => row.loop_closure_px = finite(r.loop_closure_px),
+                Err(err) => row.sfm_error = Some(err.to_string()),
+            }
         }
         if row.method.has_paraboloid() {
             row.deformations = c.state.deformations.clone();

@@ -45,8 +45,9 @@ fn opt(v: Option<f64>) -> Vec<f64> {
 }
 
 /// Metrics of the whole calibration, summarised per method.
-const ROW_METRICS: [(&str, Getter); 4] = [
+const ROW_METRICS: [(&str, Getter); 5] = [
     ("rmse_px", |r| opt(r.rmse_px)),
+    ("loop_closure_px", |r| opt(r.loop_closure_px)),
     ("bias_ratio", |r| opt(r.bias_ratio)),
     ("max_out_of_plane_m", |r| r.max_out_of_plane_m.clone()),
     ("iterations", |r| vec![r.iterations as f64]),
@@ -176,6 +177,13 @@ pub fn protocol_csv(header: &Header, rows: &[Row]) -> Result<Vec<u8>> {
     columns.extend(["max_out_of_plane_m_mean", "max_out_of_plane_m_max"]);
     let intrinsics = intrinsics_columns(header);
     columns.extend(intrinsics.iter().copied());
+    // The `[sfm]` columns only where the protocol ran the experiment.
+    let sfm = rows
+        .iter()
+        .any(|r| r.loop_closure_px.is_some() || r.sfm_error.is_some());
+    if sfm {
+        columns.extend(["loop_closure_px", "sfm_error"]);
+    }
     w.write_record(&columns).map_err(to_err)?;
     for r in rows {
         let bends = Stat::of(r.max_out_of_plane_m.iter().copied()).map(|s| s.mean);
@@ -208,6 +216,12 @@ pub fn protocol_csv(header: &Header, rows: &[Row]) -> Result<Vec<u8>> {
                     .iter()
                     .map(|name| cell(c.and_then(|c| c.intrinsics.get(name)))),
             );
+            if sfm {
+                rec.extend([
+                    cell(r.loop_closure_px),
+                    r.sfm_error.clone().unwrap_or_default(),
+                ]);
+            }
             w.write_record(&rec).map_err(to_err)?;
         }
     }
@@ -848,6 +862,7 @@ pub fn report_tables(summary: &Summary, rows: &[Row]) -> Vec<Table> {
     tables.push(mapping_table(summary));
     tables.extend(bending_table(summary, rows));
     tables.extend(auto_table(summary, rows));
+    tables.extend(crate::app::sfm_report::sfm_table(&summary.header, rows));
     tables.extend(failed_table(rows));
     tables
 }
@@ -1111,6 +1126,9 @@ pub fn plots(summary: &Summary, rows: &[Row]) -> Result<Vec<(String, String)>> {
     }
     if let Some(svg) = plot_auto(h, rows)? {
         out.push((AUTO_SVG.to_string(), svg));
+    }
+    if let Some(svg) = crate::app::sfm_report::sfm_plot(h, rows)? {
+        out.push((crate::app::sfm_report::SFM_PLOT.to_string(), svg));
     }
     if let Some((r, j)) = most_bent(rows) {
         let svg = plots::deformation_svg(

@@ -9,6 +9,8 @@ pub mod metrics;
 pub mod pose;
 pub mod rig;
 pub mod selection;
+pub mod sfm_geometry;
+pub mod sfm_scene;
 pub mod state;
 pub mod synthetic;
 pub mod target;

@@ -111,6 +111,42 @@ pub mod ffi {
         jacobian_col_param: Vec<u32>,
     }
 
+    /// A bundle adjustment of the structure-from-motion experiment: camera-from-world
+    /// poses and world points against pixels, intrinsics held (`solver::sfm`).
+    #[derive(Debug, Clone, Default)]
+    struct BundleData {
+        /// Lens model name, as in the lens-model registry.
+        lens_model: String,
+        /// The calibration under test, held constant.
+        intrinsics: Vec<f64>,
+        /// Camera-from-world pose per frame, 6 each (angle-axis, translation); updated in place.
+        poses: Vec<f64>,
+        /// World points, 3 each; updated in place.
+        points: Vec<f64>,
+        obs_frame: Vec<u32>,
+        obs_point: Vec<u32>,
+        /// Observed pixels, 2 per observation.
+        obs_uv: Vec<f64>,
+        /// Per frame: pose held at its value.
+        held_frames: Vec<bool>,
+        /// Per point: held at its value.
+        held_points: Vec<bool>,
+        /// Cauchy loss scale in pixels; 0 for plain least squares.
+        loss_scale_px: f64,
+        max_iterations: i32,
+    }
+
+    /// What Ceres reported about one bundle adjustment.
+    #[derive(Debug, Clone, Default)]
+    struct BundleReport {
+        usable: bool,
+        converged: bool,
+        iterations: i32,
+        initial_cost: f64,
+        final_cost: f64,
+        message: String,
+    }
+
     unsafe extern "C++" {
         include!("deformcal/cpp/bridge.h");
 
@@ -137,6 +173,9 @@ pub mod ffi {
 
         /// The Jacobian straight from the cost functions.
         fn jacobian(data: &ProblemData, options: &SolveOptions) -> Result<UniquePtr<Jacobian>>;
+
+        /// Solves a bundle adjustment in place (`cpp/sfm.h`).
+        fn solve_bundle(data: &mut BundleData) -> Result<BundleReport>;
 
         // Only the cross-language registry tests call this.
         #[allow(dead_code)]

@@ -300,3 +300,70 @@ fn a_tight_bend_prior_holds_the_bend_and_the_smoothness_ties_frames() {
     bridge::solve(&mut d, &options()).unwrap();
     assert!((d.params[f0] - d.params[f1]).abs() < 1e-9);
 }
+
+/// A bundle adjustment of one free pose against held points, noise-free pixels
+/// of the kb4 fisheye (any registry model works): the pose comes back exactly.
+fn bundle(model: LensModel) -> bridge::BundleData {
+    let cam = crate::model::synthetic::true_intrinsics_of(model);
+    let truth = crate::model::pose::Pose {
+        rotation: [0.05, -0.1, 0.02],
+        translation: [0.3, -0.2, 0.1],
+    };
+    let points: Vec<nalgebra::Vector3<f64>> = (0..20)
+        .map(|i| {
+            let f = i as f64;
+            nalgebra::Vector3::new(
+                (f * 0.9).sin(),
+                (f * 1.7).cos() * 0.6,
+                4.0 + (f * 0.3).sin(),
+            )
+        })
+        .collect();
+    let mut d = bridge::BundleData {
+        lens_model: model.name().into(),
+        intrinsics: cam.params().to_vec(),
+        poses: vec![0.0; 6],
+        loss_scale_px: 1.0,
+        max_iterations: 50,
+        held_frames: vec![false],
+        ..Default::default()
+    };
+    for (i, x) in points.iter().enumerate() {
+        let uv = cam.project(&truth.transform(x)).unwrap();
+        d.points.extend(x.iter());
+        d.held_points.push(true);
+        d.obs_frame.push(0);
+        d.obs_point.push(i as u32);
+        d.obs_uv.extend([uv.x, uv.y]);
+    }
+    d
+}
+
+#[test]
+fn bundle_adjustment_recovers_a_pose_with_any_lens_model() {
+    for model in [LensModel::Radial3, LensModel::Kb4, LensModel::DoubleSphere] {
+        let mut d = bundle(model);
+        let r = bridge::solve_bundle(&mut d).unwrap();
+        assert!(r.usable && r.final_cost < 1e-12, "{model}: {r:?}");
+        let want = [0.05, -0.1, 0.02, 0.3, -0.2, 0.1];
+        for (a, b) in d.poses.iter().zip(want) {
+            assert!((a - b).abs() < 1e-7, "{model}: {:?}", d.poses);
+        }
+    }
+}
+
+#[test]
+fn bad_bundle_input_is_an_error() {
+    let mut d = bundle(LensModel::Radial3);
+    d.obs_point[3] = 99;
+    assert!(bridge::solve_bundle(&mut d).is_err());
+    let mut d = bundle(LensModel::Radial3);
+    d.points[0] = f64::NAN;
+    assert!(bridge::solve_bundle(&mut d).is_err());
+    let mut d = bundle(LensModel::Radial3);
+    d.lens_model = "pinhole9".into();
+    assert!(bridge::solve_bundle(&mut d).is_err());
+    let mut d = bundle(LensModel::Radial3);
+    d.intrinsics.pop();
+    assert!(bridge::solve_bundle(&mut d).is_err());
+}

@@ -9,5 +9,6 @@ pub mod problem;
 pub mod residuals;
 pub mod robust;
 pub mod select;
+pub mod sfm;
 mod trust;
 pub mod uncertainty;

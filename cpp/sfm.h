@@ -1,0 +1,155 @@
+// Bundle adjustment of the structure-from-motion experiment (src/solver/sfm.rs):
+// camera poses and 3D points against feature observations, the intrinsics held
+// constant at the calibration under test, a Cauchy loss.  Reuses the templated
+// lens models of camera.h, so every lens model works.  Included once, at the end
+// of solver.cc (after its anonymous namespace: Fail, SilenceGlogOnce).
+#pragma once
+
+#include <ceres/ceres.h>
+
+#include <string>
+
+#include "deformcal/cpp/camera.h"
+
+namespace deformcal {
+namespace {
+
+// Observed minus projected pixel of a world point in a camera-from-world pose.
+// The Jacobian is chained by hand: the rigid transform's in closed form
+// (TransformPointWithJacobian), the lens's by three-wide Jets on the camera
+// point; nine-wide Jets through the whole chain cost four times as much.
+template <class Lens>
+class BundleResidual : public ceres::SizedCostFunction<2, kPoseSize, 3> {
+ public:
+  BundleResidual(const double* intrinsics, double u, double v) : u_(u), v_(v) {
+    for (int i = 0; i < Lens::kNumParams; ++i) p_[i] = intrinsics[i];
+  }
+  bool Evaluate(double const* const* params, double* r, double** jac) const override {
+    double xc[3], R[9], d_omega[9];
+    TransformPointWithJacobian(params[0], params[1], xc, R, d_omega);
+    using J3 = ceres::Jet<double, 3>;
+    J3 x[3], p[Lens::kNumParams], uv[2];
+    for (int i = 0; i < 3; ++i) x[i] = J3(xc[i], i);
+    for (int i = 0; i < Lens::kNumParams; ++i) p[i] = J3(p_[i]);
+    if (!Lens::Project(p, x, uv)) return false;
+    r[0] = u_ - uv[0].a;
+    r[1] = v_ - uv[1].a;
+    if (!std::isfinite(r[0]) || !std::isfinite(r[1])) return false;
+    if (jac == nullptr) return true;
+    for (int row = 0; row < 2; ++row) {
+      const auto& g = uv[row].v;  // d uv[row] / d xc
+      if (jac[0] != nullptr) {
+        for (int c = 0; c < 3; ++c) {
+          jac[0][row * kPoseSize + c] =
+              -(g[0] * d_omega[c] + g[1] * d_omega[3 + c] + g[2] * d_omega[6 + c]);
+          jac[0][row * kPoseSize + 3 + c] = -g[c];
+        }
+      }
+      if (jac[1] != nullptr) {
+        for (int c = 0; c < 3; ++c) {
+          jac[1][row * 3 + c] = -(g[0] * R[c] + g[1] * R[3 + c] + g[2] * R[6 + c]);
+        }
+      }
+    }
+    return true;
+  }
+
+ private:
+  double p_[Lens::kNumParams];
+  double u_, v_;
+};
+
+void ValidateBundle(const ffi::BundleData& d) {
+  const size_t frames = d.poses.size() / kPoseSize, points = d.points.size() / 3;
+  if (d.poses.size() % kPoseSize != 0 || d.points.size() % 3 != 0) Fail("poses or points");
+  if (d.held_frames.size() != frames || d.held_points.size() != points) Fail("held flags");
+  const size_t n = d.obs_frame.size();
+  if (d.obs_point.size() != n || d.obs_uv.size() != 2 * n) Fail("observation sizes");
+  for (size_t i = 0; i < n; ++i) {
+    if (d.obs_frame[i] >= frames || d.obs_point[i] >= points) Fail("observation index");
+  }
+  for (double v : d.poses) if (!std::isfinite(v)) Fail("a pose is not finite");
+  for (double v : d.points) if (!std::isfinite(v)) Fail("a point is not finite");
+  for (double v : d.obs_uv) if (!std::isfinite(v)) Fail("an observation is not finite");
+  if (!(d.loss_scale_px >= 0.0) || d.max_iterations < 1) Fail("loss scale or iterations");
+}
+
+}  // namespace
+
+namespace ffi {
+
+BundleReport solve_bundle(BundleData& d) {
+  SilenceGlogOnce();
+  ValidateBundle(d);
+  ceres::Problem::Options po;
+  po.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  po.disable_all_safety_checks = true;  // ValidateBundle checked the indices and values
+  ceres::Problem problem(po);
+  ceres::CauchyLoss cauchy(d.loss_scale_px > 0.0 ? d.loss_scale_px : 1.0);
+  ceres::LossFunction* loss = d.loss_scale_px > 0.0 ? &cauchy : nullptr;
+  const bool known = DispatchLens(std::string(d.lens_model), [&](auto lens) {
+    using Lens = decltype(lens);
+    if (d.intrinsics.size() != static_cast<size_t>(Lens::kNumParams)) Fail("intrinsics size");
+    for (size_t i = 0; i < d.obs_frame.size(); ++i) {
+      auto* cost =
+          new BundleResidual<Lens>(d.intrinsics.data(), d.obs_uv[2 * i], d.obs_uv[2 * i + 1]);
+      problem.AddResidualBlock(cost, loss, d.poses.data() + kPoseSize * d.obs_frame[i],
+                               d.points.data() + 3 * d.obs_point[i]);
+    }
+  });
+  if (!known) Fail("unknown lens model `" + std::string(d.lens_model) + "`");
+  for (size_t j = 0; j < d.held_frames.size(); ++j) {
+    double* b = d.poses.data() + kPoseSize * j;
+    if (d.held_frames[j] && problem.HasParameterBlock(b)) problem.SetParameterBlockConstant(b);
+  }
+  for (size_t i = 0; i < d.held_points.size(); ++i) {
+    double* b = d.points.data() + 3 * i;
+    if (d.held_points[i] && problem.HasParameterBlock(b)) problem.SetParameterBlockConstant(b);
+  }
+  ceres::Solver::Options s;
+  s.max_num_iterations = d.max_iterations;
+  // Points first in the elimination order, given rather than searched for: the
+  // search costs as much as the solve in a window this small.  A pose-only fit
+  // (every point held) has nothing to eliminate.
+  auto* ordering = new ceres::ParameterBlockOrdering;
+  size_t free_points = 0;
+  for (size_t i = 0; i < d.held_points.size(); ++i) {
+    double* b = d.points.data() + 3 * i;
+    if (!d.held_points[i] && problem.HasParameterBlock(b)) {
+      ordering->AddElementToGroup(b, 0);
+      ++free_points;
+    }
+  }
+  for (size_t j = 0; j < d.held_frames.size(); ++j) {
+    double* b = d.poses.data() + kPoseSize * j;
+    if (!d.held_frames[j] && problem.HasParameterBlock(b)) ordering->AddElementToGroup(b, 1);
+  }
+  if (free_points > 0) {
+    s.linear_solver_type = ceres::DENSE_SCHUR;
+    s.linear_solver_ordering.reset(ordering);
+  } else {
+    s.linear_solver_type = ceres::DENSE_QR;
+    delete ordering;
+  }
+  s.num_threads = 1;
+  s.logging_type = ceres::SILENT;
+  s.function_tolerance = 1e-6;
+  ceres::Solver::Summary summary;
+  BundleReport r{};
+  if (problem.NumResidualBlocks() == 0) {
+    r.usable = false;
+    r.message = "no observations";
+    return r;
+  }
+  ceres::Solve(s, &problem, &summary);
+  r.usable = summary.IsSolutionUsable();
+  r.converged = summary.termination_type == ceres::CONVERGENCE;
+  r.iterations = static_cast<int>(summary.iterations.size());
+  r.initial_cost = summary.initial_cost;
+  r.final_cost = summary.final_cost;
+  r.message = summary.message;
+  return r;
+}
+
+}  // namespace ffi
+}  // namespace deformcal
