@@ -96,6 +96,7 @@ impl From<&CalibrationConfig> for SolverSettings {
             fix_gauge: true,
             verbose: c.verbose,
             reference_jacobian: false,
+            per_corner_blocks: false,
             outlier_k: c.outlier_k,
         }
     }
