@@ -155,13 +155,8 @@ bool DispatchLens(const std::string& name, F&& f) {
   return found;
 }
 
-// x_out = R x + t for a double pose, with R and dx_out/dω (both row-major 3x3);
-// dx_out/dt is the identity.  Closed form, so the pose's derivatives cost one
-// sincos instead of six-wide Jets: d(R x)/dω = -[R x]_× J_l(ω), with SO(3)'s left
-// Jacobian J_l = I + b [ω]_× + c [ω]_×² and R = I + a [ω]_× + b [ω]_×².
-inline void TransformPointWithJacobian(const double* pose, const double* x, double* x_out,
-                                       double* R, double* d_omega) {
-  const double* w = pose;
+// R(ω) and SO(3)'s left Jacobian J_l(ω) (see TransformPointWithJacobian).
+inline void RotationWithLeftJacobian(const double* w, double* R, double* Jl) {
   const double t2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2];
   double a, b, c;
   if (t2 < 1e-4) {
@@ -181,12 +176,21 @@ inline void TransformPointWithJacobian(const double* pose, const double* x, doub
   double W2[9];
   for (int i = 0; i < 3; ++i)
     for (int j = 0; j < 3; ++j) W2[3 * i + j] = w[i] * w[j] - (i == j ? t2 : 0.0);
-  double Jl[9];
   for (int k = 0; k < 9; ++k) {
     const double id = (k % 4 == 0) ? 1.0 : 0.0;
     R[k] = id + a * W[k] + b * W2[k];
     Jl[k] = id + b * W[k] + c * W2[k];
   }
+}
+
+// x_out = R x + t for a double pose, with R and dx_out/dω (both row-major 3x3);
+// dx_out/dt is the identity.  Closed form, so the pose's derivatives cost one
+// sincos instead of six-wide Jets: d(R x)/dω = -[R x]_× J_l(ω), with SO(3)'s left
+// Jacobian J_l = I + b [ω]_× + c [ω]_×² and R = I + a [ω]_× + b [ω]_×².
+inline void TransformPointWithJacobian(const double* pose, const double* x, double* x_out,
+                                       double* R, double* d_omega) {
+  double Jl[9];
+  RotationWithLeftJacobian(pose, R, Jl);
   double y[3];
   for (int i = 0; i < 3; ++i) y[i] = R[3 * i] * x[0] + R[3 * i + 1] * x[1] + R[3 * i + 2] * x[2];
   // -[y]_× rows, times J_l.

@@ -6,6 +6,8 @@
 #include <ceres/ceres.h>
 
 #include <algorithm>
+#include <cmath>
+#include <memory>
 #include <type_traits>
 #include <utility>
 #include <vector>
@@ -243,6 +245,235 @@ class ChainedReprojection final : public ceres::CostFunction {
  private:
   double u_, v_, w_;
   double x_[3];
+};
+
+// Cauchy's rho(s) = a^2 ln(1 + s/a^2) folded into a corner's residual, since a
+// cost function with several corners cannot hand Ceres a per-corner
+// LossFunction (Ceres applies one to the whole block).  The residual becomes
+// r~ = f r with f = sqrt(rho(s)/s), so |r~|^2 = rho(|r|^2) and the cost and its
+// gradient are the loss's exactly: the optimum is the same.  The Jacobian is
+// M J with M = sqrt(rho') P_t + (rho'/f) P_r (P_r = r r^T/s, P_t = I - P_r):
+// radially the exact derivative of r~, tangentially the sqrt(rho') of Ceres'
+// own (clamped Triggs) correction, which is exact there, so the Gauss-Newton
+// model is closer to the loss's Hessian than either alone (fewer iterations).
+struct CauchyFold {
+  double a2 = 0.0;  // squared scale; 0 means no loss
+
+  // f, and M's tangential and radial factors.
+  void Scale(double s, double* f, double* mt, double* mr) const {
+    if (a2 == 0.0) {
+      *f = *mt = *mr = 1.0;
+      return;
+    }
+    const double x = s / a2;
+    const double drho = 1.0 / (1.0 + x);  // rho'(s)
+    // rho(s)/s; the closed form cancels near zero, where the series is exact.
+    const double rho_s = x < 1e-6 ? 1.0 - x / 2.0 + x * x / 3.0 : std::log1p(x) / x;
+    *f = std::sqrt(rho_s);
+    *mt = std::sqrt(drho);
+    *mr = drho / *f;
+  }
+};
+
+// ViewBlock hides the lens and board so that the assembly collects views of
+// several lens models in one map.
+class ViewBlock : public ceres::CostFunction {
+ public:
+  virtual void Add(double u, double v, double w, const double* x) = 0;
+  // Fixes the block layout once every corner is added.
+  virtual void Finish() = 0;
+};
+
+template <class Lens, class Board, bool kRig>
+class ViewReprojection final : public ViewBlock {
+ public:
+  static constexpr int kFrameSize = kPoseSize + Board::kFrameExtra;
+  static constexpr int kModel = Board::kFrameExtra + Board::kCornerSize;
+
+  ViewReprojection(CauchyFold loss, std::shared_ptr<const bool> apply_loss)
+      : loss_(loss), apply_loss_(std::move(apply_loss)) {}
+
+  void Add(double u, double v, double w, const double* x) override {
+    obs_.push_back({u, v, w, {x[0], x[1], x[2]}});
+  }
+  void Finish() override {
+    set_num_residuals(2 * static_cast<int>(obs_.size()));
+    auto* sizes = mutable_parameter_block_sizes();
+    sizes->push_back(Lens::kNumParams);
+    if (kRig) sizes->push_back(kPoseSize);
+    sizes->push_back(kFrameSize);
+    if (Board::kCornerSize > 0) {
+      for (size_t i = 0; i < obs_.size(); ++i) sizes->push_back(Board::kCornerSize);
+    }
+  }
+  bool Evaluate(double const* const* p, double* r, double** jacobians) const override {
+    const double* intrinsics = p[0];
+    const double* rig = kRig ? p[1] : nullptr;
+    const int fb = kRig ? 2 : 1;
+    const double* frame = p[fb];
+    const CauchyFold loss = *apply_loss_ ? loss_ : CauchyFold{};
+    const size_t n = obs_.size();
+    double R[9], Jl[9], Rk[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1}, Jlk[9];
+    RotationAndJacobian(frame, R, Jl);
+    if (kRig) RotationAndJacobian(rig, Rk, Jlk);
+    double* Ji = jacobians ? jacobians[0] : nullptr;
+    double* Jr = jacobians && kRig ? jacobians[1] : nullptr;
+    double* Jf = jacobians ? jacobians[fb] : nullptr;
+    if (jacobians && Board::kCornerSize > 0) {
+      for (size_t i = 0; i < n; ++i) {
+        if (double* Jc = jacobians[fb + 1 + i]) {
+          std::fill(Jc, Jc + 2 * n * Board::kCornerSize, 0.0);
+        }
+      }
+    }
+    for (size_t i = 0; i < n; ++i) {
+      const Obs& o = obs_[i];
+      const double* corner = Board::kCornerSize > 0 ? p[fb + 1 + i] : nullptr;
+      double X[3];
+      double dX[3][kModel > 0 ? kModel : 1] = {};
+      BoardPoint(o.x, frame + kPoseSize, corner, X, dX);
+      double y[3], xc[3], cam[3];
+      for (int a = 0; a < 3; ++a) {
+        y[a] = R[3 * a] * X[0] + R[3 * a + 1] * X[1] + R[3 * a + 2] * X[2];
+        xc[a] = y[a] + frame[3 + a];
+      }
+      for (int a = 0; a < 3; ++a) {
+        cam[a] = kRig ? Rk[3 * a] * xc[0] + Rk[3 * a + 1] * xc[1] + Rk[3 * a + 2] * xc[2] + rig[3 + a]
+                      : xc[a];
+      }
+      double* ri = r + 2 * i;
+      if (jacobians == nullptr) {
+        double uv[2];
+        if (!Lens::Project(intrinsics, cam, uv)) return false;
+        ri[0] = o.w * (o.u - uv[0]);
+        ri[1] = o.w * (o.v - uv[1]);
+        double f, mt, mr;
+        loss.Scale(ri[0] * ri[0] + ri[1] * ri[1], &f, &mt, &mr);
+        ri[0] *= f;
+        ri[1] *= f;
+        continue;
+      }
+      constexpr int kLens = Lens::kNumParams;
+      using JP = ceres::Jet<double, kLens + 3>;
+      JP ij[kLens], pc[3], uv[2];
+      for (int k = 0; k < kLens; ++k) ij[k] = JP(intrinsics[k], k);
+      for (int k = 0; k < 3; ++k) pc[k] = JP(cam[k], kLens + k);
+      if (!Lens::Project(ij, pc, uv)) return false;
+      const double e[2] = {o.w * (o.u - uv[0].a), o.w * (o.v - uv[1].a)};
+      const double s = e[0] * e[0] + e[1] * e[1];
+      double f, mt, mr;
+      loss.Scale(s, &f, &mt, &mr);
+      // M = mt I + (mr - mt) e e^T / s (CauchyFold).
+      double M[2][2] = {{mt, 0}, {0, mt}};
+      if (mr != mt && s > 0.0) {
+        for (int a = 0; a < 2; ++a)
+          for (int b = 0; b < 2; ++b) M[a][b] += (mr - mt) * e[a] * e[b] / s;
+      }
+      ri[0] = f * e[0];
+      ri[1] = f * e[1];
+      // dr~/dintrinsics and dr~/dcam: -w M duv.
+      double dcam[2][3];
+      for (int a = 0; a < 2; ++a) {
+        for (int k = 0; k < kLens + 3; ++k) {
+          const double d = -o.w * (M[a][0] * uv[0].v[k] + M[a][1] * uv[1].v[k]);
+          if (k < kLens) {
+            if (Ji) Ji[(2 * i + a) * kLens + k] = d;
+          } else {
+            dcam[a][k - kLens] = d;
+          }
+        }
+      }
+      // dr~/dxc = dcam Rk (identity without a rig).
+      double dxc[2][3];
+      for (int a = 0; a < 2; ++a)
+        for (int c = 0; c < 3; ++c)
+          dxc[a][c] = dcam[a][0] * Rk[c] + dcam[a][1] * Rk[3 + c] + dcam[a][2] * Rk[6 + c];
+      if (kRig && Jr) {
+        // dcam/dw_k = -[Rk xc]_x Jlk, dcam/dt_k = I.
+        double yk[3];
+        for (int a = 0; a < 3; ++a) yk[a] = cam[a] - rig[3 + a];
+        double Dk[9];
+        SkewTimes(yk, Jlk, Dk);
+        for (int a = 0; a < 2; ++a) {
+          double* row = Jr + (2 * i + a) * kPoseSize;
+          for (int c = 0; c < 3; ++c) {
+            row[c] = dcam[a][0] * Dk[c] + dcam[a][1] * Dk[3 + c] + dcam[a][2] * Dk[6 + c];
+            row[3 + c] = dcam[a][c];
+          }
+        }
+      }
+      // dr~/dX = dxc R.
+      double dXr[2][3];
+      for (int a = 0; a < 2; ++a)
+        for (int m = 0; m < 3; ++m)
+          dXr[a][m] = dxc[a][0] * R[m] + dxc[a][1] * R[3 + m] + dxc[a][2] * R[6 + m];
+      if (Jf) {
+        double D[9];
+        SkewTimes(y, Jl, D);  // dxc/dw = -[y]_x Jl
+        for (int a = 0; a < 2; ++a) {
+          double* row = Jf + (2 * i + a) * kFrameSize;
+          for (int c = 0; c < 3; ++c) {
+            row[c] = dxc[a][0] * D[c] + dxc[a][1] * D[3 + c] + dxc[a][2] * D[6 + c];
+            row[3 + c] = dxc[a][c];
+          }
+          for (int m = 0; m < Board::kFrameExtra; ++m)
+            row[kPoseSize + m] = dXr[a][0] * dX[0][m] + dXr[a][1] * dX[1][m] + dXr[a][2] * dX[2][m];
+        }
+      }
+      if (Board::kCornerSize > 0) {
+        if (double* Jc = jacobians[fb + 1 + i]) {
+          for (int a = 0; a < 2; ++a)
+            for (int c = 0; c < Board::kCornerSize; ++c) {
+              const int m = Board::kFrameExtra + c;
+              Jc[(2 * i + a) * Board::kCornerSize + c] =
+                  dXr[a][0] * dX[0][m] + dXr[a][1] * dX[1][m] + dXr[a][2] * dX[2][m];
+            }
+        }
+      }
+    }
+    return true;
+  }
+
+ private:
+  struct Obs {
+    double u, v, w;
+    double x[3];
+  };
+
+  // R(w) and the left Jacobian J_l of the rotation (TransformPointWithJacobian's).
+  static void RotationAndJacobian(const double* pose, double* R, double* Jl) {
+    RotationWithLeftJacobian(pose, R, Jl);
+  }
+  // D = -[y]_x J.
+  static void SkewTimes(const double* y, const double* J, double* D) {
+    const double S[9] = {0, y[2], -y[1], -y[2], 0, y[0], y[1], -y[0], 0};
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b)
+        D[3 * a + b] = S[3 * a] * J[b] + S[3 * a + 1] * J[3 + b] + S[3 * a + 2] * J[6 + b];
+  }
+  // The board point and its derivatives over the model's parameters (Jets).
+  static void BoardPoint(const double* x, const double* extra_in, const double* corner_in,
+                         double* X, double (*dX)[kModel > 0 ? kModel : 1]) {
+    if constexpr (kModel > 0) {
+      using JM = ceres::Jet<double, kModel>;
+      JM extra[Board::kFrameExtra > 0 ? Board::kFrameExtra : 1];
+      JM corr[Board::kCornerSize > 0 ? Board::kCornerSize : 1];
+      for (int e = 0; e < Board::kFrameExtra; ++e) extra[e] = JM(extra_in[e], e);
+      for (int c = 0; c < Board::kCornerSize; ++c) corr[c] = JM(corner_in[c], Board::kFrameExtra + c);
+      JM out[3];
+      Board::Point(x, extra, corr, out);
+      for (int i = 0; i < 3; ++i) {
+        X[i] = out[i].a;
+        for (int k = 0; k < kModel; ++k) dX[i][k] = out[i].v[k];
+      }
+    } else {
+      Board::Point(x, static_cast<const double*>(nullptr), static_cast<const double*>(nullptr), X);
+    }
+  }
+
+  CauchyFold loss_;
+  std::shared_ptr<const bool> apply_loss_;
+  std::vector<Obs> obs_;
 };
 
 // Residuals of the corners of one view when only the board pose is free (a

@@ -156,6 +156,7 @@ impl From<&CalibrationConfig> for SolverSettings {
             fix_gauge: true,
             verbose: c.verbose,
             reference_jacobian: false,
+            per_corner_blocks: false,
             outlier_k: c.outlier_k,
             board: BoardPriors {
                 static_sigma_m: c.static_prior_mm.map(|v| v * 1e-3),

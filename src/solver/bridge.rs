@@ -79,6 +79,10 @@ pub mod ffi {
         verbose: bool,
         /// Use the single-piece autodiff functor (the reference for the chained Jacobian).
         reference_jacobian: bool,
+        /// The path before issue 17, kept as the reference the faster one is
+        /// checked against: one residual block per corner, Ceres' Cauchy loss
+        /// from the first iteration.
+        per_corner_blocks: bool,
     }
 
     /// What Ceres reported about one solve.

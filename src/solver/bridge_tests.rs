@@ -15,6 +15,7 @@ fn options() -> SolveOptions {
         fix_gauge: true,
         verbose: false,
         reference_jacobian: false,
+        per_corner_blocks: false,
     }
 }
 

@@ -518,7 +518,7 @@ pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {
 
 /// [`calibrate`] without the covariance, for fits only their parameters matter
 /// of (`auto`'s cross-validation folds).
-pub(crate) fn fit(dataset: &Dataset, request: &Request) -> Result<Calibration> {
+pub fn fit(dataset: &Dataset, request: &Request) -> Result<Calibration> {
     let start = Instant::now();
     let mut warnings = Vec::new();
     let dataset = robust::drop_outside_image(dataset, &mut warnings)?;

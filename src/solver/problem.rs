@@ -46,6 +46,10 @@ pub struct SolverSettings {
     /// Differentiate the whole residual in one autodiff piece (slower; the reference
     /// the default chained Jacobian is tested against).
     pub reference_jacobian: bool,
+    /// Solve the way deformcal did before its per-view blocks and loss-free
+    /// warm-up: one residual block per corner, Ceres' Cauchy loss throughout (slower;
+    /// the reference the faster path is checked against).
+    pub per_corner_blocks: bool,
     /// Outlier rejection threshold in noise standard deviations (0: off); see
     /// `calibrate::reject_outliers`.
     pub outlier_k: f64,
@@ -66,6 +70,7 @@ impl Default for SolverSettings {
             fix_gauge: true,
             verbose: false,
             reference_jacobian: false,
+            per_corner_blocks: false,
             outlier_k: 4.0,
             board: BoardPriors::default(),
         }
@@ -98,6 +103,7 @@ impl SolverSettings {
             fix_gauge: self.fix_gauge,
             verbose: self.verbose,
             reference_jacobian: self.reference_jacobian,
+            per_corner_blocks: self.per_corner_blocks,
         }
     }
 }
