@@ -383,7 +383,7 @@ fn merge_refuses_impossible_headers_and_wrapping_subsets() {
         p.to_str().unwrap(),
     ]));
     assert!(
-        e.contains("a row has subset 9223372036854775808 outside the run"),
+        e.contains("a row (subset 9223372036854775808, method standard) lies outside the run"),
         "{e}"
     );
     let p = shard(dir.path(), |_| {});
