@@ -31,13 +31,21 @@ pub struct Trust {
 /// noise adds: E‖d‖² = 12σ² for the 2D residuals. So σ̂ comes from the data
 /// without assuming the model is right, which is what a bias test needs. Rows
 /// and columns of the board both give triples. `None` with no triple.
+///
+/// The residuals are in pixels; each is scaled by its observation's weight (the
+/// corner refinement's σ_ref/σ for photos, 0.5^level for corners.vnl) first, so
+/// σ̂ is the noise of a weight-1 corner, the unit that the solver's weighted
+/// residuals, and so the covariance, are in.
 pub fn noise_from_neighbours(dataset: &Dataset, residuals: &[f64]) -> Option<f64> {
     let cols = dataset.target.cols;
     // Ordered, so that the sum, and every figure scaled by σ̂, is the same in
     // every run (a hash map's order changes from process to process).
     let mut at: BTreeMap<(usize, usize, usize), [f64; 2]> = BTreeMap::new();
     for (o, r) in dataset.observations.iter().zip(residuals.chunks_exact(2)) {
-        at.insert((o.camera, o.frame, o.corner), [r[0], r[1]]);
+        at.insert(
+            (o.camera, o.frame, o.corner),
+            [r[0] * o.weight, r[1] * o.weight],
+        );
     }
     let (mut sum, mut triples) = (0.0, 0usize);
     for (&(camera, frame, corner), r) in &at {
@@ -53,6 +61,17 @@ pub fn noise_from_neighbours(dataset: &Dataset, residuals: &[f64]) -> Option<f64
         }
     }
     (triples > 0).then(|| (sum / (12.0 * triples as f64)).sqrt())
+}
+
+/// Residuals (u, v per observation, pixels) times their observation's weight:
+/// in units of a weight-1 corner's noise, as the solver weighs them.
+pub fn weighted(dataset: &Dataset, residuals: &[f64]) -> Vec<f64> {
+    dataset
+        .observations
+        .iter()
+        .zip(residuals.chunks_exact(2))
+        .flat_map(|(o, r)| [r[0] * o.weight, r[1] * o.weight])
+        .collect()
 }
 
 /// E[rmse²] = 2σ̂²(1 − p/N) of a model without systematic error: the squared

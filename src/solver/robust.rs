@@ -291,7 +291,9 @@ fn local_deviations(dataset: &Dataset, residuals: &[f64]) -> Vec<f64> {
 /// neighbour of a corner rejected this round waits for the next round, since the
 /// outlier's residual is part of its own comparison.
 fn pick_outliers(dataset: &Dataset, residuals: &[f64], k: f64) -> Vec<usize> {
-    let deviations = local_deviations(dataset, residuals);
+    // In units of each corner's own noise: a corner the refinement found
+    // uncertain is not an outlier for being as far off as its σ says.
+    let deviations = local_deviations(dataset, &crate::model::trust::weighted(dataset, residuals));
     // Each deviation is the larger of two |coordinates|: for Gaussian noise of
     // σ_d per coordinate its median is 1.052·σ_d (P(|x| < t)² = ½).
     let sigma = robust_sigma(&deviations) / 1.4826 / 1.052;

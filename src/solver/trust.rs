@@ -31,7 +31,9 @@ impl Calibration {
     }
 
     /// Noise, bias ratio and G-AIC; σ̂ is `noise_px` when given, else estimated
-    /// from neighbouring corners' residuals. `None` without a noise estimate.
+    /// from neighbouring corners' residuals. Both are in units of a weight-1
+    /// corner (weighted residuals), as the covariance is. `None` without a noise
+    /// estimate.
     pub fn trust(&self, noise_px: Option<f64>) -> Option<Trust> {
         let (noise, source) = match noise_px {
             Some(n) => (n, "config"),
@@ -41,7 +43,7 @@ impl Calibration {
             ),
         };
         Some(trust::assess(
-            &self.residuals,
+            &trust::weighted(&self.dataset, &self.residuals),
             self.free_parameters(),
             noise,
             source,
