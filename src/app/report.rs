@@ -52,8 +52,12 @@ fn write_trust(s: &mut String, c: &Calibration) {
     let Some(t) = c.trust(c.detector_noise_px) else {
         return;
     };
+    let weighted = c.dataset.observations.iter().any(|o| o.weight != 1.0);
     let source = if t.noise_source == "config" {
         "as configured"
+    } else if weighted {
+        // Photos (the refinement's σ_ref/σ) and corners.vnl (0.5^level).
+        "of a weight-1 corner, estimated from neighbouring corners' weighted residuals"
     } else {
         "estimated from neighbouring corners"
     };
