@@ -207,6 +207,20 @@ fn key_figures(c: &Calibration) -> Vec<Vec<String>> {
             format!("{:.1}, {}", t.g_aic, t.parameters),
         ]);
     }
+    if let Ok(u) = c.uncertainty() {
+        for (cam, u) in c.dataset.cameras.iter().zip(&u) {
+            rows.push(vec![
+                format!(
+                    "expected mapping error `expected_mapping_error_px` (px), `{}`",
+                    cam.name
+                ),
+                format!(
+                    "{:.3} ({:.3} with the rotation removed)",
+                    u.expected_mapping_error_px, u.expected_mapping_error_rot_px
+                ),
+            ]);
+        }
+    }
     if c.method.has_paraboloid() {
         rows.push(vec![
             "largest bend `max_out_of_plane_m` (mm)".into(),
@@ -274,22 +288,32 @@ fn camera_section(
     Ok(s)
 }
 
-/// A camera's intrinsics with units, and its pose in the rig.
+/// A camera's intrinsics with their 1-σ uncertainty and units, and its pose in
+/// the rig.
 fn intrinsics_table(c: &Calibration, k: usize) -> String {
     let i = &c.state.intrinsics[k];
+    let uncertainty = c.uncertainty();
+    let std = uncertainty.as_ref().ok().and_then(|u| u.get(k));
     let rows: Vec<Vec<String>> = i
         .named()
         .enumerate()
         .map(|(n, (name, v))| {
-            let (value, unit) = if n < 4 {
-                (format!("{v:.3}"), "px")
-            } else {
-                (format!("{v:.6}"), "unitless")
+            let (digits, unit) = if n < 4 { (3, "px") } else { (6, "unitless") };
+            let sigma = match std.map(|u| u.intrinsics_std.iter().find(|(p, _)| *p == name)) {
+                Some(Some((_, e))) => format!("{e:.digits$}"),
+                Some(None) => "held".to_string(),
+                None => "–".to_string(),
             };
-            vec![format!("`{name}`"), value, unit.to_string()]
+            vec![
+                format!("`{name}`"),
+                format!("{v:.digits$}"),
+                sigma,
+                unit.to_string(),
+            ]
         })
         .collect();
-    let mut s = page::table_html(&["parameter".into(), "value".into(), "unit".into()], &rows);
+    let header = ["parameter", "value", "1-σ", "unit"].map(String::from);
+    let mut s = page::table_html(&header, &rows);
     if k > 0 {
         let pose = c.state.camera_poses[k];
         let _ = write!(
