@@ -116,9 +116,15 @@ fn mean_error(model: LensModel, bend: f64, method: Method) -> f64 {
 const SEEDS: u64 = 4;
 
 /// The largest ratio to the rigid floor allowed of (rigid boards, bent boards).
-/// The targets (1.3, 1.5) hold for `radial3` and `opencv5`; the wide
-/// lenses, whose floor is a few hundredths of a pixel, exceed them by up to 2.4×
-/// with the extra parameters of the deformation methods (the figures print).
+/// The targets (1.3, 1.5) hold for `radial3` and `opencv5` on these four
+/// sets only; they are not met in general. Over 32 sets (`bending_board_experiment`)
+/// `dynamic` and `full` cost 1.15–1.8× on rigid boards (`ds` 1.0–1.3×), and the
+/// covariance predicts 1.24–1.40× (`dynamic`) and 1.49–1.64× (`full`): the
+/// paraboloid's three parameters per image correlate with the intrinsics. A bend
+/// prior does not help (even σ = 0.5 mm, a quarter of T2's real bends, lowers the
+/// rigid `dynamic` ratio by 3 % at most, and `opencv8` gets worse);
+/// `static_prior_mm = 0.05` brings `static` to ≤ 1.11× and
+/// `full` to 0.97–1.46× but leaves `dynamic` unchanged (README, "Lens models").
 fn allowed(model: LensModel) -> (f64, f64) {
     if matches!(model, LensModel::Radial3 | LensModel::OpenCv5) {
         (1.3, 1.5)
@@ -299,4 +305,73 @@ fn export_refuses_intrinsics_of_another_model() {
         .remove("p1");
     let stderr = export(&json);
     assert!(stderr.contains("match no lens model"), "{stderr}");
+}
+
+/// The experiment behind [`allowed`]: the ratios of the bending-board test over
+/// more seeds, with board priors and fixed lens terms to compare
+/// (`cargo test --release --test lens_models -- --ignored --nocapture`;
+/// env `LENS_SEEDS`, `LENS_MODELS`, `LENS_STATIC_MM`, `LENS_BEND_MM`, `LENS_FIX`,
+/// `LENS_MEDIAN` for medians, `LENS_EXPECTED` for the covariance's prediction).
+#[test]
+#[ignore]
+fn bending_board_experiment() {
+    use rayon::prelude::*;
+    let var = |k: &str| std::env::var(k).ok();
+    let mm = |k: &str| var(k).and_then(|v| v.parse::<f64>().ok()).map(|v| v * 1e-3);
+    let seeds: u64 = var("LENS_SEEDS").and_then(|v| v.parse().ok()).unwrap_or(16);
+    let models: Vec<LensModel> = match var("LENS_MODELS") {
+        Some(s) => s.split(',').filter_map(LensModel::parse).collect(),
+        None => LensModel::ALL.to_vec(),
+    };
+    let fix: Vec<String> = var("LENS_FIX")
+        .map(|s| s.split(',').map(String::from).collect())
+        .unwrap_or_default();
+    let mut settings = SolverSettings::default();
+    settings.board.static_sigma_m = mm("LENS_STATIC_MM");
+    settings.board.bend_sigma_m = mm("LENS_BEND_MM");
+    println!("| model | rigid floor | static | dynamic | full | bent standard | dynamic | full |");
+    for model in models {
+        let error = |bend: f64, method: Method| -> f64 {
+            let e: Vec<f64> = (1..=seeds)
+                .into_par_iter()
+                .map(|seed| {
+                    let (mut d, t) = through(Preset::T2, &[model], 30, seed, bend);
+                    d.cameras[0].fix = fix.clone();
+                    let request = Request {
+                        method,
+                        settings: settings.clone(),
+                        gauge: None,
+                    };
+                    let c = calibrate(&d, &request);
+                    match (&c, var("LENS_EXPECTED")) {
+                        (Ok(c), Some(_)) => c
+                            .uncertainty()
+                            .map_or(f64::NAN, |u| u[0].expected_mapping_error_rot_px),
+                        (Ok(c), None) => rot_error(c, &t),
+                        _ => f64::NAN,
+                    }
+                })
+                .collect();
+            if var("LENS_VERBOSE").is_some() {
+                let v: Vec<String> = e.iter().map(|x| format!("{x:.3}")).collect();
+                println!("  {model} {method} bend {bend}: {}", v.join(" "));
+            }
+            let mut ok: Vec<f64> = e.into_iter().filter(|x| x.is_finite()).collect();
+            if var("LENS_MEDIAN").is_some() {
+                // The means have heavy tails (single sets far off): the median too.
+                ok.sort_by(f64::total_cmp);
+                return (ok[(ok.len() - 1) / 2] + ok[ok.len() / 2]) / 2.0;
+            }
+            ok.iter().sum::<f64>() / ok.len() as f64
+        };
+        let floor = error(0.0, Method::Standard);
+        let mut line = format!("| {model} | {floor:.4} |");
+        for m in &Method::ALL[1..] {
+            line += &format!(" {:.2} |", error(0.0, *m) / floor);
+        }
+        for m in [Method::Standard, Method::Dynamic, Method::Full] {
+            line += &format!(" {:.2} |", error(1.0, m) / floor);
+        }
+        println!("{line}");
+    }
 }
