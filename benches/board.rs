@@ -26,6 +26,17 @@ fn subsets() -> usize {
 
 /// Mean truth mapping error per method of a protocol run on `preset` (bend scaled).
 fn protocol(preset: &str, extra: &str, bend_scale: f64) -> Vec<(Method, f64, f64, usize)> {
+    summarise(&protocol_rows(preset, extra, &|g| {
+        g.bend_scale = bend_scale
+    }))
+}
+
+/// The protocol's rows on `preset` as `vary` changes its generator.
+fn protocol_rows(
+    preset: &str,
+    extra: &str,
+    vary: &dyn Fn(&mut Generator),
+) -> Vec<deformcal::app::protocol::Row> {
     let text = format!("[data]\nsynthetic = \"{preset}\"\n[calibration]\n{extra}\n");
     let config = Config::parse(&text, Path::new("bench.toml")).expect("bench config");
     let p = ProtocolConfig {
@@ -33,12 +44,17 @@ fn protocol(preset: &str, extra: &str, bend_scale: f64) -> Vec<(Method, f64, f64
         ..ProtocolConfig::default()
     };
     let mut setup = prepare(&config, &p).expect("setup");
-    if bend_scale != 1.0 {
-        let mut g = Generator::new(Preset::parse(preset).unwrap(), None, 1);
-        g.bend_scale = bend_scale;
+    let base = Generator::new(Preset::parse(preset).unwrap(), None, 1);
+    let mut g = base.clone();
+    vary(&mut g);
+    if g != base {
         setup.dataset = g.generate().0;
     }
-    let rows = setup.run(None, &|| {});
+    setup.run(None, &|| {})
+}
+
+/// Mean and standard deviation of the truth mapping error per method.
+fn summarise(rows: &[deformcal::app::protocol::Row]) -> Vec<(Method, f64, f64, usize)> {
     Method::ALL
         .iter()
         .map(|&m| {
@@ -90,6 +106,75 @@ fn prior() {
                 r[3].1 / r[2].1
             );
         }
+    }
+}
+
+/// Why `static` loses to `standard` on T4: the protocol under one change at a time.
+fn t4() {
+    let prior = std::env::var("PRIOR").unwrap_or_else(|_| "0.05".into());
+    println!(
+        "## T4 dissected ({} × 25, static_prior_mm = {prior})",
+        subsets()
+    );
+    println!("| variant | standard | static | dynamic | full | static/standard | full/dynamic |");
+    println!("|---|---|---|---|---|---|---|");
+    type Vary = Box<dyn Fn(&mut Generator)>;
+    let variants: Vec<(&str, String, Vary)> = vec![
+        ("as is", String::new(), Box::new(|_| {})),
+        ("no bend", String::new(), Box::new(|g| g.bend_scale = 0.0)),
+        (
+            "no print error",
+            String::new(),
+            Box::new(|g| g.print_scale = 0.0),
+        ),
+        (
+            "noise 0.15 given",
+            "detector_noise_px = 0.15".into(),
+            Box::new(|_| {}),
+        ),
+    ];
+    let mut variants = variants;
+    for n in std::env::var("NOISES").unwrap_or_default().split(',') {
+        if let Ok(v) = n.parse::<f64>() {
+            variants.push((
+                "noise given",
+                format!("detector_noise_px = {v}"),
+                Box::new(|_| {}),
+            ));
+        }
+    }
+    let only = std::env::var("VARIANT").ok();
+    for (name, extra, vary) in &variants {
+        if only.as_deref().is_some_and(|o| !name.contains(o)) {
+            continue;
+        }
+        let rows = protocol_rows(
+            "t4",
+            &format!("static_prior_mm = {prior}\n{extra}"),
+            vary.as_ref(),
+        );
+        let rmse = |m: Method| {
+            let v: Vec<f64> = rows
+                .iter()
+                .filter(|r| r.method == m)
+                .filter_map(|r| r.rmse_px)
+                .collect();
+            v.iter().sum::<f64>() / v.len() as f64
+        };
+        let r = summarise(&rows);
+        let cell = |i: usize| format!("{:.3} ± {:.3}", r[i].1, r[i].2);
+        println!(
+            "| {name} {extra} (RMSE standard {:.3}, static {:.3}, dynamic {:.3}) | {} | {} | {} | {} | {:.2} | {:.2} |",
+            rmse(Method::Standard),
+            rmse(Method::Static),
+            rmse(Method::Dynamic),
+            cell(0),
+            cell(1),
+            cell(2),
+            cell(3),
+            r[1].1 / r[0].1,
+            r[3].1 / r[2].1
+        );
     }
 }
 
@@ -195,43 +280,81 @@ fn shuffled(data: &Dataset, seed: u64) -> Dataset {
     out
 }
 
-fn smoothness_levels() -> Vec<Option<f64>> {
-    let mut v = vec![None];
-    v.extend(
-        std::env::var("SMOOTH")
-            .unwrap_or_else(|_| "0.3".into())
-            .split(',')
-            .filter_map(|s| s.parse().ok())
-            .map(Some),
-    );
-    v
+/// RMS over frames and terms of the true bend's change from one frame to the
+/// next, as Δz at the board's corner, metres: the flex rate a smoothness prior
+/// of that σ expects (what a user would set from how fast the board flexes).
+fn flex_rate(truth: &Truth) -> f64 {
+    let t = truth.target;
+    let x = (t.cols as f64 - 1.0) / 2.0 * t.spacing;
+    let y = (t.rows as f64 - 1.0) / 2.0 * t.spacing;
+    let reach = [x * x, y * y, x * y];
+    let d = &truth.deformations;
+    let sq: f64 = d
+        .windows(2)
+        .map(|w| {
+            let diff = [w[1].a - w[0].a, w[1].b - w[0].b, w[1].c - w[0].c];
+            diff.iter()
+                .zip(reach)
+                .map(|(c, r)| (c * r).powi(2))
+                .sum::<f64>()
+        })
+        .sum();
+    (sq / (3.0 * (d.len() - 1) as f64)).sqrt()
+}
+
+/// The video scenarios: the `flex` preset as stills, as a video (poses moving
+/// smoothly), and as a hand-held video (poses moving, noisier detections, the
+/// board partly out of view and farther away).
+fn video_generator(scenario: &str, seed: u64) -> Generator {
+    let mut g = Generator::new(Preset::Flex, None, seed);
+    if scenario != "stills" {
+        g.video = true;
+    }
+    if scenario == "hand-held" {
+        g.noise_px = 0.5;
+        g.min_visible = 0.4;
+        g.spec.distance_m = [3.0, 8.0];
+    }
+    g
 }
 
 fn video() {
-    println!("## temporal smoothness on `flex` (200 frames): dynamic, truth mapping error (px) and bend error (mm RMS)");
-    println!("| seed | order | smoothness | mapping | mapping (rot) | bend |");
-    println!("|---|---|---|---|---|---|");
-    for seed in 1..=3u64 {
-        let (data, truth) = Generator::new(Preset::Flex, None, seed).generate();
-        for (label, d) in [("time", data.clone()), ("shuffled", shuffled(&data, seed))] {
-            for sm in smoothness_levels() {
-                let mut s = SolverSettings::default();
-                s.board.smoothness_sigma_m = sm.map(|v| v * 1e-3);
-                let c = run(&d, Method::Dynamic, &s);
-                let cam = &c.dataset.cameras[0];
-                let rot = deformcal::model::metrics::mapping_error_rot(
-                    &truth.intrinsics[0],
-                    &c.state.intrinsics[0],
-                    cam.width,
-                    cam.height,
-                );
-                println!(
-                    "| {seed} | {label} | {} | {:.4} | {rot:.4} | {:.4} |",
-                    sm.map_or("off".into(), |v| format!("{v} mm")),
-                    truth_error(&c, &truth),
-                    bend_error(&c, &truth) * 1e3
-                );
-            }
+    println!("## temporal smoothness on `flex` (200 frames, `dynamic`): truth mapping error (px), bend error (mm RMS); smoothness σ = the true flex rate (× SMOOTH_SCALE)");
+    println!("| scenario | seed | order | σ (mm) | mapping off | mapping on | change | bend off | bend on | change |");
+    println!("|---|---|---|---|---|---|---|---|---|---|");
+    let scale: f64 = std::env::var("SMOOTH_SCALE")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1.0);
+    let seeds: Vec<u64> = (1..=subsets().min(3) as u64).collect();
+    for scenario in ["stills", "video", "hand-held"] {
+        let lines: Vec<String> = seeds
+            .par_iter()
+            .flat_map(|&seed| {
+                let (data, truth) = video_generator(scenario, seed).generate();
+                let sigma = flex_rate(&truth) * scale;
+                let mut out = Vec::new();
+                for (label, d) in [("time", data.clone()), ("shuffled", shuffled(&data, seed))] {
+                    let plain = run(&d, Method::Dynamic, &SolverSettings::default());
+                    let mut s = SolverSettings::default();
+                    s.board.smoothness_sigma_m = Some(sigma);
+                    let smooth = run(&d, Method::Dynamic, &s);
+                    let (m0, m1) = (truth_error(&plain, &truth), truth_error(&smooth, &truth));
+                    let (b0, b1) = (bend_error(&plain, &truth), bend_error(&smooth, &truth));
+                    out.push(format!(
+                        "| {scenario} | {seed} | {label} | {:.3} | {m0:.4} | {m1:.4} | {:+.0} % | {:.4} | {:.4} | {:+.0} % |",
+                        sigma * 1e3,
+                        100.0 * (m1 / m0 - 1.0),
+                        b0 * 1e3,
+                        b1 * 1e3,
+                        100.0 * (b1 / b0 - 1.0)
+                    ));
+                }
+                out
+            })
+            .collect();
+        for l in lines {
+            println!("{l}");
         }
     }
 }
@@ -334,6 +457,9 @@ fn main() {
     let all = which == "all";
     if all || which == "prior" {
         prior();
+    }
+    if which == "t4" {
+        t4();
     }
     if all || which == "order" {
         order();
