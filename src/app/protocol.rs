@@ -507,6 +507,18 @@ fn dataset_name(config: &Config) -> String {
     }
 }
 
+/// The row's per-image bends (methods that have a paraboloid): the paraboloid,
+/// the largest deflection and, for bend orders 3 and 4, the higher terms.
+fn record_bends(row: &mut Row, c: &Calibration) {
+    if row.method.has_paraboloid() {
+        row.deformations = c.state.deformations.clone();
+        row.max_out_of_plane_m = c.frame_bends();
+        if c.state.higher_bends.iter().flatten().any(|&h| h != 0.0) {
+            row.higher_bends = c.state.higher_bends.clone();
+        }
+    }
+}
+
 /// `test_rmse_px` of camera `k`: its views of the reference set refitted with only
 /// the board poses free, the given intrinsics and the reference static correction
 /// held.  The refit is plain least squares: the reference set is clean, and the
@@ -694,13 +706,7 @@ impl Setup {
                 Err(err) => row.sfm_error = Some(err.to_string()),
             }
         }
-        if row.method.has_paraboloid() {
-            row.deformations = c.state.deformations.clone();
-            row.max_out_of_plane_m = c.frame_bends();
-            if c.state.higher_bends.iter().flatten().any(|&h| h != 0.0) {
-                row.higher_bends = c.state.higher_bends.clone();
-            }
-        }
+        record_bends(&mut row, &c);
         row
     }
 
