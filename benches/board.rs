@@ -1,11 +1,14 @@
 //! The board-model experiments of issue 15 (beyond the paper), each printed as a
 //! table. `cargo bench --bench board -- <experiment>` with `prior` (the 50 × 25
 //! protocol on T1–T4 and a rigid board, with and without `static_prior_mm`),
+//! `t4` (why `static` loses on T4: the protocol with one change at a time; not in
+//! `all`),
 //! `order` (the `warped` preset: bend orders 2–4), `auto` (`bend_order = "auto"`
 //! on `warped` and T1–T4), `video` (the `flex`
-//! preset: temporal smoothness in time order and shuffled), `geometry` (a board
-//! measured on the 650-image reference loaded into 25-image `standard`
-//! calibrations) or `all`; `SUBSETS=n` shortens the protocol runs.
+//! preset as stills, as a video and as a hand-held video: temporal smoothness in
+//! time order and shuffled), `geometry` (a board measured on the 650-image
+//! reference loaded into 25-image `standard` and `static` calibrations) or `all`;
+//! `SUBSETS=n` shortens the protocol runs.
 use deformcal::app::config::{Config, ProtocolConfig};
 use deformcal::app::protocol::prepare;
 use deformcal::model::board::{BoardGeometry, Method};
@@ -26,6 +29,17 @@ fn subsets() -> usize {
 
 /// Mean truth mapping error per method of a protocol run on `preset` (bend scaled).
 fn protocol(preset: &str, extra: &str, bend_scale: f64) -> Vec<(Method, f64, f64, usize)> {
+    summarise(&protocol_rows(preset, extra, &|g| {
+        g.bend_scale = bend_scale
+    }))
+}
+
+/// The protocol's rows on `preset` as `vary` changes its generator.
+fn protocol_rows(
+    preset: &str,
+    extra: &str,
+    vary: &dyn Fn(&mut Generator),
+) -> Vec<deformcal::app::protocol::Row> {
     let text = format!("[data]\nsynthetic = \"{preset}\"\n[calibration]\n{extra}\n");
     let config = Config::parse(&text, Path::new("bench.toml")).expect("bench config");
     let p = ProtocolConfig {
@@ -33,12 +47,17 @@ fn protocol(preset: &str, extra: &str, bend_scale: f64) -> Vec<(Method, f64, f64
         ..ProtocolConfig::default()
     };
     let mut setup = prepare(&config, &p).expect("setup");
-    if bend_scale != 1.0 {
-        let mut g = Generator::new(Preset::parse(preset).unwrap(), None, 1);
-        g.bend_scale = bend_scale;
+    let base = Generator::new(Preset::parse(preset).unwrap(), None, 1);
+    let mut g = base.clone();
+    vary(&mut g);
+    if g != base {
         setup.dataset = g.generate().0;
     }
-    let rows = setup.run(None, &|| {});
+    setup.run(None, &|| {})
+}
+
+/// Mean and standard deviation of the truth mapping error per method.
+fn summarise(rows: &[deformcal::app::protocol::Row]) -> Vec<(Method, f64, f64, usize)> {
     Method::ALL
         .iter()
         .map(|&m| {
@@ -90,6 +109,75 @@ fn prior() {
                 r[3].1 / r[2].1
             );
         }
+    }
+}
+
+/// Why `static` loses to `standard` on T4: the protocol under one change at a time.
+fn t4() {
+    let prior = std::env::var("PRIOR").unwrap_or_else(|_| "0.05".into());
+    println!(
+        "## T4 dissected ({} × 25, static_prior_mm = {prior})",
+        subsets()
+    );
+    println!("| variant | standard | static | dynamic | full | static/standard | full/dynamic |");
+    println!("|---|---|---|---|---|---|---|");
+    type Vary = Box<dyn Fn(&mut Generator)>;
+    let variants: Vec<(&str, String, Vary)> = vec![
+        ("as is", String::new(), Box::new(|_| {})),
+        ("no bend", String::new(), Box::new(|g| g.bend_scale = 0.0)),
+        (
+            "no print error",
+            String::new(),
+            Box::new(|g| g.print_scale = 0.0),
+        ),
+        (
+            "noise 0.15 given",
+            "detector_noise_px = 0.15".into(),
+            Box::new(|_| {}),
+        ),
+    ];
+    let mut variants = variants;
+    for n in std::env::var("NOISES").unwrap_or_default().split(',') {
+        if let Ok(v) = n.parse::<f64>() {
+            variants.push((
+                "noise given",
+                format!("detector_noise_px = {v}"),
+                Box::new(|_| {}),
+            ));
+        }
+    }
+    let only = std::env::var("VARIANT").ok();
+    for (name, extra, vary) in &variants {
+        if only.as_deref().is_some_and(|o| !name.contains(o)) {
+            continue;
+        }
+        let rows = protocol_rows(
+            "t4",
+            &format!("static_prior_mm = {prior}\n{extra}"),
+            vary.as_ref(),
+        );
+        let rmse = |m: Method| {
+            let v: Vec<f64> = rows
+                .iter()
+                .filter(|r| r.method == m)
+                .filter_map(|r| r.rmse_px)
+                .collect();
+            v.iter().sum::<f64>() / v.len() as f64
+        };
+        let r = summarise(&rows);
+        let cell = |i: usize| format!("{:.3} ± {:.3}", r[i].1, r[i].2);
+        println!(
+            "| {name} {extra} (RMSE standard {:.3}, static {:.3}, dynamic {:.3}) | {} | {} | {} | {} | {:.2} | {:.2} |",
+            rmse(Method::Standard),
+            rmse(Method::Static),
+            rmse(Method::Dynamic),
+            cell(0),
+            cell(1),
+            cell(2),
+            cell(3),
+            r[1].1 / r[0].1,
+            r[3].1 / r[2].1
+        );
     }
 }
 
@@ -195,43 +283,91 @@ fn shuffled(data: &Dataset, seed: u64) -> Dataset {
     out
 }
 
-fn smoothness_levels() -> Vec<Option<f64>> {
-    let mut v = vec![None];
-    v.extend(
-        std::env::var("SMOOTH")
-            .unwrap_or_else(|_| "0.3".into())
-            .split(',')
-            .filter_map(|s| s.parse().ok())
-            .map(Some),
-    );
-    v
+/// RMS over frames and terms of the true bend's change from one frame to the
+/// next, as Δz at the board's corner, metres: the flex rate a smoothness prior
+/// of that σ expects (what a user would set from how fast the board flexes).
+fn flex_rate(truth: &Truth) -> f64 {
+    let t = truth.target;
+    let x = (t.cols as f64 - 1.0) / 2.0 * t.spacing;
+    let y = (t.rows as f64 - 1.0) / 2.0 * t.spacing;
+    let reach = [x * x, y * y, x * y];
+    let d = &truth.deformations;
+    let sq: f64 = d
+        .windows(2)
+        .map(|w| {
+            let diff = [w[1].a - w[0].a, w[1].b - w[0].b, w[1].c - w[0].c];
+            diff.iter()
+                .zip(reach)
+                .map(|(c, r)| (c * r).powi(2))
+                .sum::<f64>()
+        })
+        .sum();
+    (sq / (3.0 * (d.len() - 1) as f64)).sqrt()
+}
+
+/// The video scenarios: the `flex` preset as stills, as a video (poses moving
+/// smoothly), and as a hand-held video (poses moving, noisier detections, the
+/// board partly out of view and farther away).
+fn video_generator(scenario: &str, seed: u64) -> Generator {
+    let mut g = Generator::new(Preset::Flex, None, seed);
+    if scenario != "stills" {
+        g.video = true;
+    }
+    if scenario == "hand-held" {
+        g.noise_px = 0.5;
+        g.min_visible = 0.4;
+        g.spec.distance_m = [3.0, 8.0];
+    }
+    g
 }
 
 fn video() {
-    println!("## temporal smoothness on `flex` (200 frames): dynamic, truth mapping error (px) and bend error (mm RMS)");
-    println!("| seed | order | smoothness | mapping | mapping (rot) | bend |");
-    println!("|---|---|---|---|---|---|");
-    for seed in 1..=3u64 {
-        let (data, truth) = Generator::new(Preset::Flex, None, seed).generate();
-        for (label, d) in [("time", data.clone()), ("shuffled", shuffled(&data, seed))] {
-            for sm in smoothness_levels() {
-                let mut s = SolverSettings::default();
-                s.board.smoothness_sigma_m = sm.map(|v| v * 1e-3);
-                let c = run(&d, Method::Dynamic, &s);
-                let cam = &c.dataset.cameras[0];
-                let rot = deformcal::model::metrics::mapping_error_rot(
-                    &truth.intrinsics[0],
-                    &c.state.intrinsics[0],
-                    cam.width,
-                    cam.height,
-                );
-                println!(
-                    "| {seed} | {label} | {} | {:.4} | {rot:.4} | {:.4} |",
-                    sm.map_or("off".into(), |v| format!("{v} mm")),
-                    truth_error(&c, &truth),
-                    bend_error(&c, &truth) * 1e3
-                );
-            }
+    println!("## temporal smoothness on `flex` (200 frames, `dynamic`): truth mapping error (px), bend error (mm RMS); smoothness σ = the true flex rate (× SMOOTH_SCALE)");
+    println!("| scenario | seed | order | σ (mm) | mapping off | mapping on | change | bend off | bend on | change |");
+    println!("|---|---|---|---|---|---|---|---|---|---|");
+    let scale: f64 = std::env::var("SMOOTH_SCALE")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1.0);
+    let seeds: Vec<u64> = (1..=subsets().min(3) as u64).collect();
+    for scenario in ["stills", "video", "hand-held"] {
+        let lines: Vec<String> = seeds
+            .par_iter()
+            .flat_map(|&seed| {
+                let (data, truth) = video_generator(scenario, seed).generate();
+                let sigma = flex_rate(&truth) * scale;
+                let mut out = Vec::new();
+                for (label, d) in [("time", data.clone()), ("shuffled", shuffled(&data, seed))] {
+                    let plain = run(&d, Method::Dynamic, &SolverSettings::default());
+                    let mut s = SolverSettings::default();
+                    s.board.smoothness_sigma_m = Some(sigma);
+                    let smooth = run(&d, Method::Dynamic, &s);
+                    if std::env::var("STAGES").is_ok() {
+                        for c in [&plain, &smooth] {
+                            let st: Vec<String> = c
+                                .stages
+                                .iter()
+                                .map(|s| format!("{}:{}it{}", s.method, s.iterations, if s.converged { "" } else { "!" }))
+                                .collect();
+                            eprintln!("{scenario} {seed} {label}: {}", st.join(" "));
+                        }
+                    }
+                    let (m0, m1) = (truth_error(&plain, &truth), truth_error(&smooth, &truth));
+                    let (b0, b1) = (bend_error(&plain, &truth), bend_error(&smooth, &truth));
+                    out.push(format!(
+                        "| {scenario} | {seed} | {label} | {:.3} | {m0:.4} | {m1:.4} | {:+.0} % | {:.4} | {:.4} | {:+.0} % |",
+                        sigma * 1e3,
+                        100.0 * (m1 / m0 - 1.0),
+                        b0 * 1e3,
+                        b1 * 1e3,
+                        100.0 * (b1 / b0 - 1.0)
+                    ));
+                }
+                out
+            })
+            .collect();
+        for l in lines {
+            println!("{l}");
         }
     }
 }
@@ -250,7 +386,7 @@ fn geometry() {
     // T2's board is the reference's: the same seed draws the same print error.
     let (t2, truth) = Generator::new(Preset::T2, None, 1).generate();
     let seeds: Vec<u64> = (1..=subsets() as u64).collect();
-    let rows: Vec<(f64, f64)> = seeds
+    let rows: Vec<[f64; 4]> = seeds
         .par_iter()
         .map(|&seed| {
             use rand::seq::index::sample;
@@ -262,17 +398,31 @@ fn geometry() {
             let plain = truth_error(&run(&data, Method::Standard, &s), &truth);
             let mut with = s.clone();
             with.board.geometry = Some(geometry.clone());
-            (
+            // As the nominal board (`standard`: held) and as the prior's mean with
+            // its covariance (`static`: re-estimated, held by the measured σ).
+            [
                 plain,
                 truth_error(&run(&data, Method::Standard, &with), &truth),
-            )
+                truth_error(&run(&data, Method::Static, &s), &truth),
+                truth_error(&run(&data, Method::Static, &with), &truth),
+            ]
         })
         .collect();
     let n = rows.len() as f64;
-    let (a, b) = rows.iter().fold((0.0, 0.0), |(x, y), r| (x + r.0, y + r.1));
-    let wins = rows.iter().filter(|r| r.1 < r.0).count();
-    println!("| standard | standard + board.json | better in |\n|---|---|---|");
-    println!("| {:.3} | {:.3} | {wins}/{} |", a / n, b / n, rows.len());
+    let mean = |i: usize| rows.iter().map(|r| r[i]).sum::<f64>() / n;
+    let wins = |i: usize| rows.iter().filter(|r| r[i] < r[0]).count();
+    println!("| standard | standard + board.json (nominal) | static | static + board.json (prior mean, covariance) |\n|---|---|---|---|");
+    println!(
+        "| {:.3} | {:.3} (better in {}/{}) | {:.3} | {:.3} (better than standard in {}/{}) |",
+        mean(0),
+        mean(1),
+        wins(1),
+        rows.len(),
+        mean(2),
+        mean(3),
+        wins(3),
+        rows.len()
+    );
 }
 
 fn auto() {
@@ -334,6 +484,9 @@ fn main() {
     let all = which == "all";
     if all || which == "prior" {
         prior();
+    }
+    if which == "t4" {
+        t4();
     }
     if all || which == "order" {
         order();

@@ -313,6 +313,7 @@ fn cli_shards_merge_into_the_unsharded_outputs() {
         "mapping.svg",
         "bend.svg",
         "deformation.svg",
+        deformcal::app::protocol::REFERENCE_BOARD_JSON,
     ] {
         let a = std::fs::read(whole.join(f)).unwrap_or_else(|_| panic!("missing {f}"));
         assert_eq!(a, std::fs::read(merged.join(f)).unwrap(), "{f} differs");

@@ -83,11 +83,16 @@ pub fn of(c: &Calibration) -> Option<BoardJson> {
 
 /// Writes `board.json` into `dir` when the calibration measured the board.
 pub fn write(dir: &Path, c: &Calibration) -> Result<()> {
-    if let Some(b) = of(c) {
-        let text = serde_json::to_string_pretty(&b).expect("board serialises");
-        write_atomic(&dir.join(BOARD_JSON), text.as_bytes())?;
+    match of(c) {
+        Some(b) => write_file(&dir.join(BOARD_JSON), &b),
+        None => Ok(()),
     }
-    Ok(())
+}
+
+/// Writes a measured board to `path` (the protocol's reference board too).
+pub fn write_file(path: &Path, b: &BoardJson) -> Result<()> {
+    let text = serde_json::to_string_pretty(b).expect("board serialises");
+    write_atomic(path, text.as_bytes())
 }
 
 /// Reads a `board.json` for a calibration of board `target`: refused unless it is

@@ -4,7 +4,7 @@
 //! is decided by the reports (`protocol_report`, `html_report`); the drawing
 //! primitives they share live here.
 use crate::error::{Error, Result};
-use crate::model::board::Paraboloid;
+use crate::model::board::{higher_dz, max_bend, HigherBend, Paraboloid};
 use crate::model::target::Target;
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -472,15 +472,34 @@ pub fn board_half_extent(target: &Target) -> (f64, f64) {
 }
 
 /// Draws the out-of-plane deformation Δz of one image over the board on `root`:
-/// a heat map with the corners marked and a colour bar in millimetres.
+/// a heat map of the whole estimated bend (the paraboloid plus any degree-3 and
+/// -4 terms) with the corners marked and a colour bar in millimetres.
 pub fn deformation_chart<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     title: &str,
     target: &Target,
     bend: &Paraboloid,
+    higher: &HigherBend,
 ) -> Drawn {
     let (half_w, half_h) = board_half_extent(target);
-    let max = bend.max_out_of_plane(target).max(1e-12);
+    let cells = 48;
+    let (dx, dy) = (2.0 * half_w / cells as f64, 2.0 * half_h / cells as f64);
+    let dz = |x: f64, y: f64| bend.dz(x, y) + higher_dz(higher, x, y);
+    let centre = |i: usize, j: usize| {
+        (
+            -half_w + (i as f64 + 0.5) * dx,
+            -half_h + (j as f64 + 0.5) * dy,
+        )
+    };
+    // The colour scale covers the cells too: beyond the outer corners a cubic or
+    // quartic bend may grow past its largest value at a corner.
+    let max = (0..cells * cells)
+        .map(|k| {
+            let (x, y) = centre(k / cells, k % cells);
+            dz(x, y).abs()
+        })
+        .fold(max_bend(target, bend, higher), f64::max)
+        .max(1e-12);
     let width = root.dim_in_pixel().0;
     let (plot, legend) = root.split_horizontally(width.saturating_sub(110));
     let mut chart = ChartBuilder::on(&plot)
@@ -501,14 +520,13 @@ pub fn deformation_chart<DB: DrawingBackend>(
         .y_desc("board y (mm), along increasing row")
         .draw()
         .map_err(pe)?;
-    let cells = 48;
-    let (dx, dy) = (2.0 * half_w / cells as f64, 2.0 * half_h / cells as f64);
     let mut rects = Vec::with_capacity(cells * cells);
     for i in 0..cells {
         for j in 0..cells {
             let x0 = -half_w + i as f64 * dx;
             let y0 = -half_h + j as f64 * dy;
-            let z = bend.dz(x0 + dx / 2.0, y0 + dy / 2.0);
+            let (x, y) = centre(i, j);
+            let z = dz(x, y);
             rects.push(Rectangle::new(
                 [(x0 * 1e3, y0 * 1e3), ((x0 + dx) * 1e3, (y0 + dy) * 1e3)],
                 diverging(z / max).filled(),
@@ -538,11 +556,16 @@ pub fn board_figure_size(target: &Target, height: u32, extra: u32) -> (u32, u32)
 }
 
 /// The out-of-plane deformation Δz of one image over the board as SVG text (the
-/// paper's Fig. 1).
-pub fn deformation_svg(title: &str, target: &Target, bend: &Paraboloid) -> Result<String> {
+/// paper's Fig. 1; `higher` is zero for the paper's paraboloid).
+pub fn deformation_svg(
+    title: &str,
+    target: &Target,
+    bend: &Paraboloid,
+    higher: &HigherBend,
+) -> Result<String> {
     let size = board_figure_size(target, 480, 200);
     svg(title, size, |root| {
-        deformation_chart(root, title, target, bend)
+        deformation_chart(root, title, target, bend, higher)
     })
 }
 

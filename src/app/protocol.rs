@@ -1,10 +1,11 @@
 //! The evaluation protocol (SPEC §3–4, the paper's section 4): reference calibration,
 //! reproducible subsets, every subset × method calibrated and measured, in parallel,
 //! sharded if asked.
+use crate::app::board_json::BoardJson;
 use crate::app::config::{Config, ProtocolConfig};
 use crate::app::sfm::{Experiment, SfmConfig};
 use crate::error::{Error, Result};
-use crate::model::board::{Method, Paraboloid};
+use crate::model::board::{HigherBend, Method, Paraboloid};
 use crate::model::camera::CameraSpec;
 use crate::model::dataset::Dataset;
 use crate::model::lens::Intrinsics;
@@ -169,7 +170,14 @@ pub struct ReferenceInfo {
     pub images: usize,
     pub observations: usize,
     pub converged: bool,
+    /// The reference's static correction in `board.json`'s format, written as
+    /// [`REFERENCE_BOARD_JSON`] and read back by `[target] geometry`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub board: Option<BoardJson>,
 }
+
+/// The protocol's file of the reference static correction (`board.json`'s format).
+pub const REFERENCE_BOARD_JSON: &str = "reference_board.json";
 
 /// One subset × method result.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -191,6 +199,9 @@ pub struct Row {
     pub deformations: Vec<Paraboloid>,
     /// `max_out_of_plane_m` per image (methods that have a paraboloid).
     pub max_out_of_plane_m: Vec<f64>,
+    /// The degree-3 and -4 bend terms per image (bend orders 3 and 4 only).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub higher_bends: Vec<HigherBend>,
     /// The share of the residual the noise does not explain (SPEC §3a).
     #[serde(default)]
     pub bias_ratio: Option<f64>,
@@ -413,6 +424,7 @@ pub fn prepare(config: &Config, protocol: &ProtocolConfig) -> Result<Setup> {
             images: c.dataset.num_frames(),
             observations: c.dataset.observations.len(),
             converged: c.converged,
+            board: crate::app::board_json::of(c),
         }),
         truth: truth.as_ref().map(|t| t.intrinsics.clone()),
         auto: protocol.auto.then(|| {
@@ -492,6 +504,18 @@ fn dataset_name(config: &Config) -> String {
         crate::app::config::DataSource::Observations(p) => p.display().to_string(),
         crate::app::config::DataSource::CornersVnl { path, .. } => path.display().to_string(),
         crate::app::config::DataSource::Photos { base, .. } => base.display().to_string(),
+    }
+}
+
+/// The row's per-image bends (methods that have a paraboloid): the paraboloid,
+/// the largest deflection and, for bend orders 3 and 4, the higher terms.
+fn record_bends(row: &mut Row, c: &Calibration) {
+    if row.method.has_paraboloid() {
+        row.deformations = c.state.deformations.clone();
+        row.max_out_of_plane_m = c.frame_bends();
+        if c.state.higher_bends.iter().flatten().any(|&h| h != 0.0) {
+            row.higher_bends = c.state.higher_bends.clone();
+        }
     }
 }
 
@@ -627,6 +651,7 @@ impl Setup {
             frames: data.frame_ids.clone(),
             deformations: Vec::new(),
             max_out_of_plane_m: Vec::new(),
+            higher_bends: Vec::new(),
             bias_ratio: None,
             auto,
             selection: None,
@@ -681,10 +706,7 @@ impl Setup {
                 Err(err) => row.sfm_error = Some(err.to_string()),
             }
         }
-        if row.method.has_paraboloid() {
-            row.deformations = c.state.deformations.clone();
-            row.max_out_of_plane_m = c.frame_bends();
-        }
+        record_bends(&mut row, &c);
         row
     }
 

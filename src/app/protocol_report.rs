@@ -9,7 +9,7 @@ use crate::app::html_report::REPORT_FILE;
 use crate::app::plots::{self, Axes, HLine, Series, PALETTE};
 use crate::app::protocol::{CameraRow, Header, Row};
 use crate::error::{Error, Result};
-use crate::model::board::Method;
+use crate::model::board::{Method, HIGHER_BEND_PARAMS};
 use crate::model::metrics::Stat;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -336,7 +336,7 @@ fn intro(h: &Header) -> Vec<String> {
     )];
     if let Some(r) = &h.reference {
         out.push(format!(
-            "Reference calibration: `static` on {} images ({} observations), RMSE {:.4} px{}; its intrinsics are in the intrinsics table.",
+            "Reference calibration: `static` on {} images ({} observations), RMSE {:.4} px{}; its intrinsics are in the intrinsics table{}.",
             r.images,
             r.observations,
             r.rmse_px,
@@ -344,6 +344,14 @@ fn intro(h: &Header) -> Vec<String> {
                 ""
             } else {
                 " (did not converge)"
+            },
+            if r.board.is_some() {
+                format!(
+                    ", its static correction in `{}` (`board.json`'s format: `[target] geometry` reads it)",
+                    crate::app::protocol::REFERENCE_BOARD_JSON
+                )
+            } else {
+                String::new()
             }
         ));
     }
@@ -1142,6 +1150,7 @@ pub fn plots(summary: &Summary, rows: &[Row]) -> Result<Vec<(String, String)>> {
             ),
             &h.target,
             &r.deformations[j],
+            r.higher_bends.get(j).unwrap_or(&[0.0; HIGHER_BEND_PARAMS]),
         )?;
         out.push(("deformation.svg".to_string(), svg));
     }
@@ -1161,6 +1170,10 @@ pub fn write_outputs(dir: &Path, header: &Header, rows: &[Row]) -> Result<Summar
     }
     write_atomic(&dir.join("protocol.csv"), &protocol_csv(header, rows)?)?;
     write_atomic(&dir.join("deformations.csv"), &deformations_csv(rows))?;
+    if let Some(b) = header.reference.as_ref().and_then(|r| r.board.as_ref()) {
+        let path = dir.join(crate::app::protocol::REFERENCE_BOARD_JSON);
+        crate::app::board_json::write_file(&path, b)?;
+    }
     let json = serde_json::to_string_pretty(&summary).expect("summary serialises");
     write_atomic(&dir.join("summary.json"), json.as_bytes())?;
     let markdown = format!(

@@ -347,7 +347,14 @@ pub struct Generator {
     pub max_tilt_deg: f64,
     /// Where the board's centre is aimed: u0, u1, v0, v1 as fractions of the image.
     pub region: [f64; 4],
+    /// Frames of a hand-held video: the pose moves smoothly between random key
+    /// poses [`VIDEO_KEY_FRAMES`] frames apart, and the bend's time is the video's
+    /// (frames whose board leaves the view are dropped). Off: independent stills.
+    pub video: bool,
 }
+
+/// Frames between the key poses of a [`Generator::video`].
+pub const VIDEO_KEY_FRAMES: usize = 25;
 
 impl Generator {
     /// The preset's defaults.
@@ -368,6 +375,7 @@ impl Generator {
             noise_px: spec.noise_px,
             max_tilt_deg: 40.0,
             region: [0.15, 0.85, 0.15, 0.85],
+            video: false,
         }
     }
 
@@ -442,6 +450,28 @@ impl Generator {
         let roll = rng.gen_range(-20.0..20.0) * deg;
         let r = Rotation3::from_euler_angles(tilt_x, tilt_y, roll);
         Pose::from_parts(&r, &centre)
+    }
+
+    /// The pose at time `t` of a video: between key poses drawn as stills (in
+    /// `keys`, extended as needed), interpolated with a smooth start and stop.
+    fn video_pose(
+        &self,
+        rng: &mut ChaCha8Rng,
+        keys: &mut Vec<Pose>,
+        t: usize,
+        camera: &CameraSpec,
+        k: &Intrinsics,
+    ) -> Pose {
+        let i = t / VIDEO_KEY_FRAMES;
+        while keys.len() < i + 2 {
+            keys.push(self.random_pose(rng, camera, k));
+        }
+        let s = (t % VIDEO_KEY_FRAMES) as f64 / VIDEO_KEY_FRAMES as f64;
+        let s = s * s * (3.0 - 2.0 * s);
+        let q = |p: &Pose| nalgebra::UnitQuaternion::from_rotation_matrix(&p.rotation_matrix());
+        let r = q(&keys[i]).slerp(&q(&keys[i + 1]), s);
+        let c = keys[i].translation_vector() * (1.0 - s) + keys[i + 1].translation_vector() * s;
+        Pose::from_parts(&r.to_rotation_matrix(), &c)
     }
 
     fn random_bend(&self, rng: &mut ChaCha8Rng, frame: usize) -> (Paraboloid, HigherBend) {
@@ -566,16 +596,29 @@ impl Generator {
         };
         let mut rows = Vec::new();
         let corners = target.num_corners() as f64;
+        // A video's clock and key poses (unused for stills).
+        let (mut time, mut keys) = (0usize, Vec::new());
         while truth.frame_poses.len() < self.images {
             // The camera the board is held up to; a lone camera draws nothing here.
             let anchor = if n > 1 { rng.gen_range(0..n) } else { 0 };
-            let held = self.random_pose(&mut rng, &cameras[anchor], &self.intrinsics[anchor]);
+            let (camera, k) = (&cameras[anchor], &self.intrinsics[anchor]);
+            let held = if self.video {
+                self.video_pose(&mut rng, &mut keys, time, camera, k)
+            } else {
+                self.random_pose(&mut rng, camera, k)
+            };
             let pose = if anchor == 0 {
                 held
             } else {
                 self.rig[anchor].inverse().compose(&held)
             };
-            let (bend, higher) = self.random_bend(&mut rng, truth.frame_poses.len());
+            let clock = if self.video {
+                time
+            } else {
+                truth.frame_poses.len()
+            };
+            time += 1;
+            let (bend, higher) = self.random_bend(&mut rng, clock);
             truth.deformations.push(bend);
             truth.higher_bends.push(higher);
             truth.frame_poses.push(pose);

@@ -503,6 +503,16 @@ fn solve_method(
         frozen: frozen.clone(),
         hold: Hold::default(),
     };
+    if request.settings.board.smoothness_sigma_m.is_some() {
+        // The smoothness prior is robust, so not convex: started from unbent
+        // frames (all alike, in its quadratic core) it holds bends the data want
+        // apart. Each frame's own bend first, then the frames tied.
+        let mut own = warm_start_settings(request);
+        own.board.smoothness_sigma_m = None;
+        let report = problem.solve(state, &own)?;
+        robust::check_stage(request.method, &report, true)?;
+        stages.push(Stage::new(request.method, &report));
+    }
     let report = problem.solve(state, &request.settings)?;
     robust::check_stage(request.method, &report, true)?;
     stages.push(Stage::new(request.method, &report));
