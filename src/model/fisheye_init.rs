@@ -59,28 +59,37 @@ fn view_rms(k: &Intrinsics, pose: &Pose, board: &[Vector2<f64>], pixels: &[Vecto
     (sum / board.len() as f64).sqrt()
 }
 
-/// Poses of every view and the median view RMS under `k`; `None` if a view fails.
-fn score(k: &Intrinsics, views: &[ViewPoints]) -> Option<(f64, Vec<Pose>)> {
+/// Each view's pose and the median RMS of the views that have one under `k`;
+/// `None` unless at least half of the views (and three) do. A view can fail
+/// under a candidate (too few rays in front, a degenerate homography) without
+/// saying anything about the others, so it must not veto the candidate.
+fn score(k: &Intrinsics, views: &[ViewPoints]) -> Option<(f64, Vec<Option<Pose>>)> {
     let mut poses = Vec::with_capacity(views.len());
     let mut errors = Vec::with_capacity(views.len());
     for (board, pixels) in views {
-        let pose = view_pose(k, board, pixels)?;
-        errors.push(view_rms(k, &pose, board, pixels));
+        let pose =
+            view_pose(k, board, pixels).filter(|pose| view_rms(k, pose, board, pixels).is_finite());
+        if let Some(pose) = &pose {
+            errors.push(view_rms(k, pose, board, pixels));
+        }
         poses.push(pose);
     }
+    if errors.len() < 3 || 2 * errors.len() < views.len() {
+        return None;
+    }
     errors.sort_by(f64::total_cmp);
-    let median = errors[errors.len() / 2];
-    median.is_finite().then_some((median, poses))
+    Some((errors[errors.len() / 2], poses))
 }
 
 /// Initial intrinsics of `template`'s model for one camera and the board pose of
-/// each of its views, or `None` if no focal length explains the views.
+/// each of its views (`None` for a view that no candidate focal length gives a
+/// pose), or `None` if no focal length explains the views.
 pub fn initialise(
     template: &Intrinsics,
     width: u32,
     height: u32,
     views: &[ViewPoints],
-) -> Option<(Intrinsics, Vec<Pose>)> {
+) -> Option<(Intrinsics, Vec<Option<Pose>>)> {
     let (cx, cy) = ((width as f64 - 1.0) / 2.0, (height as f64 - 1.0) / 2.0);
     let diagonal = (width as f64).hypot(height as f64);
     let neutral = |f: f64| Intrinsics::pinhole_of(template.model(), f, f, cx, cy);
@@ -112,13 +121,27 @@ pub fn initialise(
             lo = a;
         }
     }
-    // The refined focal length if every view takes it, else the grid's.
-    for f in [0.5 * (lo + hi), f] {
-        if let Some((_, poses)) = score(&neutral(f), views) {
-            return Some((neutral(f), poses));
+    let f = [0.5 * (lo + hi), f]
+        .into_iter()
+        .find(|&f| score(&neutral(f), views).is_some())?;
+    let (_, mut poses) = score(&neutral(f), views)?;
+    // A view without a pose at f takes the one it has at the nearest focal
+    // length that gives it one: a start that the solve refines.
+    for step in 1..F_STEPS as i32 {
+        if poses.iter().all(Option::is_some) {
+            break;
+        }
+        for g in [f * ratio.powi(step), f / ratio.powi(step)] {
+            let k = neutral(g);
+            for (pose, (board, pixels)) in poses.iter_mut().zip(views) {
+                if pose.is_none() {
+                    *pose = view_pose(&k, board, pixels)
+                        .filter(|p| view_rms(&k, p, board, pixels).is_finite());
+                }
+            }
         }
     }
-    None
+    Some((neutral(f), poses))
 }
 
 /// The correspondences of camera `camera`'s views in `frames`, in that order.

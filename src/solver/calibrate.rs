@@ -346,7 +346,7 @@ fn init_fisheye(dataset: &Dataset, k: usize, own: &[(usize, Matrix3<f64>)]) -> R
         })?;
     let mut views = vec![None; dataset.num_frames()];
     for (j, pose) in frames.into_iter().zip(poses) {
-        views[j] = Some(pose);
+        views[j] = pose;
     }
     check_orientations(&cam.name, views.iter().flatten())?;
     Ok((kk, views, false))
@@ -449,11 +449,43 @@ fn initialise(dataset: &Dataset, warnings: &mut Vec<String>) -> Result<(Dataset,
         intrinsics.push(kk);
         views.push(poses);
     }
+    let (dataset, views) = without_unposed_frames(dataset, views, warnings);
+    if dataset.num_frames() < MIN_IMAGES {
+        return Err(Error::Degenerate(format!(
+            "{} image(s) with an initial board pose; a calibration needs at least {MIN_IMAGES}",
+            dataset.num_frames()
+        )));
+    }
     let names: Vec<String> = dataset.cameras.iter().map(|c| c.name.clone()).collect();
     let rig = crate::model::rig::initial_rig(&views, &names)?;
     let poses = frame_poses(&dataset, &views, &rig);
     let state = State::rigid(intrinsics, rig, poses, &dataset.target);
     Ok((dataset, state, any_fallback))
+}
+
+/// The dataset without the frames that no camera has an initial pose of (a
+/// fisheye view that no candidate focal length explains), each named in a warning.
+fn without_unposed_frames(
+    dataset: Dataset,
+    views: Vec<Vec<Option<Pose>>>,
+    warnings: &mut Vec<String>,
+) -> (Dataset, Vec<Vec<Option<Pose>>>) {
+    let posed = |j: usize| views.iter().any(|v| v[j].is_some());
+    let kept: Vec<usize> = (0..dataset.num_frames()).filter(|&j| posed(j)).collect();
+    if kept.len() == dataset.num_frames() {
+        return (dataset, views);
+    }
+    for j in (0..dataset.num_frames()).filter(|&j| !posed(j)) {
+        warnings.push(format!(
+            "frame {} skipped: no initial board pose under the fisheye initialisation",
+            dataset.frame_ids[j]
+        ));
+    }
+    let views = views
+        .iter()
+        .map(|v| kept.iter().map(|&j| v[j]).collect())
+        .collect();
+    (dataset.subset(&kept), views)
 }
 
 /// The settings of the `standard` stage.
