@@ -7,26 +7,51 @@
 
 #include <ceres/ceres.h>
 
+#include <cmath>
+#include <deque>
+#include <memory>
 #include <string>
+#include <vector>
 
 #include "deformcal/cpp/camera.h"
 
 namespace deformcal {
 namespace {
 
+// R(ω) and SO(3)'s left Jacobian of one frame's pose, computed once per pose value
+// instead of once per residual: a window's few frames are shared by thousands of
+// residuals, and the sincos and the two 3x3 matrices were a sixth of the run.  The
+// solve is single-threaded and each solve owns its caches, so there is no race.
+struct PoseCache {
+  double omega[3] = {NAN, NAN, NAN};
+  double R[9], Jl[9];
+  void Update(const double* w) {
+    if (w[0] == omega[0] && w[1] == omega[1] && w[2] == omega[2]) return;
+    RotationWithLeftJacobian(w, R, Jl);
+    for (int i = 0; i < 3; ++i) omega[i] = w[i];
+  }
+};
+
 // Observed minus projected pixel of a world point in a camera-from-world pose.
-// The Jacobian is chained by hand: the rigid transform's in closed form
-// (TransformPointWithJacobian), the lens's by three-wide Jets on the camera
-// point; nine-wide Jets through the whole chain cost four times as much.
+// The Jacobian is chained by hand: the rigid transform's in closed form (as
+// TransformPointWithJacobian, with the rotation from the frame's PoseCache), the
+// lens's by three-wide Jets on the camera point; nine-wide Jets through the whole
+// chain cost four times as much.
 template <class Lens>
 class BundleResidual : public ceres::SizedCostFunction<2, kPoseSize, 3> {
  public:
-  BundleResidual(const double* intrinsics, double u, double v) : u_(u), v_(v) {
+  BundleResidual(const double* intrinsics, double u, double v, PoseCache* cache)
+      : u_(u), v_(v), cache_(cache) {
     for (int i = 0; i < Lens::kNumParams; ++i) p_[i] = intrinsics[i];
   }
   bool Evaluate(double const* const* params, double* r, double** jac) const override {
-    double xc[3], R[9], d_omega[9];
-    TransformPointWithJacobian(params[0], params[1], xc, R, d_omega);
+    const double* pose = params[0];
+    const double* X = params[1];
+    cache_->Update(pose);
+    const double* R = cache_->R;
+    double y[3], xc[3];
+    for (int i = 0; i < 3; ++i) y[i] = R[3 * i] * X[0] + R[3 * i + 1] * X[1] + R[3 * i + 2] * X[2];
+    for (int i = 0; i < 3; ++i) xc[i] = y[i] + pose[3 + i];
     using J3 = ceres::Jet<double, 3>;
     J3 x[3], p[Lens::kNumParams], uv[2];
     for (int i = 0; i < 3; ++i) x[i] = J3(xc[i], i);
@@ -36,6 +61,16 @@ class BundleResidual : public ceres::SizedCostFunction<2, kPoseSize, 3> {
     r[1] = v_ - uv[1].a;
     if (!std::isfinite(r[0]) || !std::isfinite(r[1])) return false;
     if (jac == nullptr) return true;
+    // d(R x)/dω = -[y]_× J_l (TransformPointWithJacobian's closed form).
+    double d_omega[9] = {};
+    if (jac[0] != nullptr) {
+      const double* Jl = cache_->Jl;
+      const double Ny[9] = {0, y[2], -y[1], -y[2], 0, y[0], y[1], -y[0], 0};
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j)
+          d_omega[3 * i + j] =
+              Ny[3 * i] * Jl[j] + Ny[3 * i + 1] * Jl[3 + j] + Ny[3 * i + 2] * Jl[6 + j];
+    }
     for (int row = 0; row < 2; ++row) {
       const auto& g = uv[row].v;  // d uv[row] / d xc
       if (jac[0] != nullptr) {
@@ -57,6 +92,7 @@ class BundleResidual : public ceres::SizedCostFunction<2, kPoseSize, 3> {
  private:
   double p_[Lens::kNumParams];
   double u_, v_;
+  PoseCache* cache_;
 };
 
 void ValidateBundle(const ffi::BundleData& d) {
@@ -81,8 +117,13 @@ namespace ffi {
 BundleReport solve_bundle(BundleData& d) {
   SilenceGlogOnce();
   ValidateBundle(d);
+  // One pose cache per frame, and the residuals in a few allocations (not one
+  // each): both must outlive the problem, so they are declared before it.
+  std::vector<PoseCache> caches(d.held_frames.size());
+  std::shared_ptr<void> residuals;
   ceres::Problem::Options po;
   po.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  po.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   po.disable_all_safety_checks = true;  // ValidateBundle checked the indices and values
   ceres::Problem problem(po);
   ceres::CauchyLoss cauchy(d.loss_scale_px > 0.0 ? d.loss_scale_px : 1.0);
@@ -90,10 +131,13 @@ BundleReport solve_bundle(BundleData& d) {
   const bool known = DispatchLens(std::string(d.lens_model), [&](auto lens) {
     using Lens = decltype(lens);
     if (d.intrinsics.size() != static_cast<size_t>(Lens::kNumParams)) Fail("intrinsics size");
+    // A deque never moves its elements (cost functions cannot be moved).
+    auto costs = std::make_shared<std::deque<BundleResidual<Lens>>>();
+    residuals = costs;
     for (size_t i = 0; i < d.obs_frame.size(); ++i) {
-      auto* cost =
-          new BundleResidual<Lens>(d.intrinsics.data(), d.obs_uv[2 * i], d.obs_uv[2 * i + 1]);
-      problem.AddResidualBlock(cost, loss, d.poses.data() + kPoseSize * d.obs_frame[i],
+      costs->emplace_back(d.intrinsics.data(), d.obs_uv[2 * i], d.obs_uv[2 * i + 1],
+                          &caches[d.obs_frame[i]]);
+      problem.AddResidualBlock(&costs->back(), loss, d.poses.data() + kPoseSize * d.obs_frame[i],
                                d.points.data() + 3 * d.obs_point[i]);
     }
   });

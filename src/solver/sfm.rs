@@ -28,6 +28,11 @@ pub struct SfmSettings {
     pub max_iterations: i32,
     /// Least parallax for a new track to be triangulated, degrees.
     pub min_parallax_deg: f64,
+    /// The window is adjusted after every this many frames (and after the last);
+    /// at most `window - 2`, so that each frame is free in at least one adjustment.
+    /// Every second frame halves the run; over eight scenes the true camera's loop
+    /// error moved by under 0.2 px each and 0.5 % on average (docs/sfm.md).
+    pub adjust_every: usize,
 }
 
 impl Default for SfmSettings {
@@ -38,6 +43,7 @@ impl Default for SfmSettings {
             loss_scale_px: 2.0,
             max_iterations: 4,
             min_parallax_deg: 1.0,
+            adjust_every: 2,
         }
     }
 }
@@ -286,6 +292,7 @@ pub fn reconstruct(
             settings.window
         )));
     }
+    let every = settings.adjust_every.clamp(1, settings.window - 2);
     let mut s = Sfm::new(scene, camera, settings);
     s.initialise()?;
     for k in 2..scene.num_frames() {
@@ -293,7 +300,10 @@ pub fn reconstruct(
         s.triangulate_new(k);
         let first = (k + 1).saturating_sub(settings.window);
         // The two oldest frames of the window are held: they fix the gauge (7 DOF).
-        s.adjust(k, &[first, first + 1])?;
+        // Every frame since the last adjustment is free in this one.
+        if k % every == 0 || k + 1 == scene.num_frames() {
+            s.adjust(k, &[first, first + 1])?;
+        }
     }
     let last = scene.num_frames() - 1;
     let first_features: Vec<_> = scene.features[0]
