@@ -285,6 +285,12 @@ fn config_keys_select_orders_priors_and_geometry() {
     assert_eq!(c.calibration.method, MethodChoice::Fixed(Method::Full4));
     let s = SolverSettings::from(&c.calibration);
     assert_eq!(s.board.static_sigma_m, Some(1e-4));
+    let c = parse("bend_prior_mm = \"auto\"\n").unwrap();
+    let s = SolverSettings::from(&c.calibration);
+    assert!(s.board.bend_sigma_auto && s.board.bend_sigma_m.is_none());
+    let c = parse("bend_prior_mm = 2\n").unwrap();
+    let s = SolverSettings::from(&c.calibration);
+    assert!(!s.board.bend_sigma_auto && s.board.bend_sigma_m == Some(2e-3));
     let c = parse("bend_order = \"auto\"\n").unwrap();
     assert_eq!(c.calibration.bend_order, BendOrder::Auto);
     assert_eq!(c.calibration.method, MethodChoice::Auto);
@@ -304,6 +310,11 @@ fn config_keys_select_orders_priors_and_geometry() {
             "static_prior_mm must be a positive",
         ),
         ("bend_smothness = 1\n", "bend_smoothness"),
+        (
+            "bend_prior_mm = \"big\"\n",
+            "bend_prior_mm must be a number",
+        ),
+        ("bend_prior_mm = 0\n", "bend_prior_mm must be a positive"),
     ] {
         let e = parse(bad).unwrap_err().to_string();
         assert!(e.contains(says), "{bad}: {e}");
@@ -452,4 +463,60 @@ fn smoothness_lets_go_of_a_shuffled_video() {
     println!("shuffled video: bend {b0:.5} → {b1:.5} m, mapping {m0:.4} → {m1:.4} px");
     assert!(b1 < 1.1 * b0, "bend error {b0} → {b1}");
     assert!((m1 - m0).abs() < 0.05 * m0, "mapping error {m0} → {m1}");
+}
+
+/// The pooled RMS over frames and terms of the true bends' Δz at the board's
+/// corner: what `bend_prior_mm = "auto"` estimates.
+fn true_bend_spread(data: &Dataset, truth: &Truth) -> f64 {
+    let reach = deformcal::model::board::bend_reach(&data.target, 3);
+    let sq = data.frame_ids.iter().flat_map(|&f| {
+        let p = truth.deformations[f as usize];
+        [p.a * reach[0], p.b * reach[1], p.c * reach[2]].map(|dz| dz * dz)
+    });
+    mean(sq).sqrt()
+}
+
+#[test]
+fn an_auto_bend_prior_holds_a_rigid_board_and_lets_a_bent_one_bend() {
+    let mut auto = SolverSettings::default();
+    auto.board.bend_sigma_auto = true;
+    let seeds = 1..=6u64;
+    for bend in [0.0, 1.0] {
+        let (mut plain_error, mut auto_error) = (0.0, 0.0);
+        for seed in seeds.clone() {
+            let mut g = Generator::new(Preset::T2, Some(30), seed);
+            g.bend_scale = bend;
+            g.print_scale = 0.0;
+            let (data, truth) = g.generate();
+            let plain = run(&data, Method::Dynamic, &SolverSettings::default());
+            let with = run(&data, Method::Dynamic, &auto);
+            let sigma = with.settings.board.bend_sigma_m.expect("an estimated σ");
+            let spread = true_bend_spread(&with.dataset, &truth);
+            eprintln!(
+                "bend {bend} seed {seed}: σ {:.3} mm against a true spread of {:.3} mm; mapping error {:.3} → {:.3} px",
+                sigma * 1e3,
+                spread * 1e3,
+                truth_error(&plain, &truth),
+                truth_error(&with, &truth)
+            );
+            if bend == 0.0 {
+                assert!(sigma < 0.15e-3, "seed {seed}: σ {sigma} on a rigid board");
+            } else {
+                assert!(
+                    (0.6..=1.4).contains(&(sigma / spread)),
+                    "seed {seed}: σ {sigma} against {spread}"
+                );
+            }
+            plain_error += truth_error(&plain, &truth);
+            auto_error += truth_error(&with, &truth);
+        }
+        if bend == 0.0 {
+            assert!(auto_error < plain_error, "{auto_error} vs {plain_error}");
+        } else {
+            assert!(
+                auto_error < 1.05 * plain_error,
+                "{auto_error} vs {plain_error}"
+            );
+        }
+    }
 }

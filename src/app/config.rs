@@ -51,8 +51,8 @@ pub struct CalibrationConfig {
     /// paper's paraboloid), or `auto` (chosen by cross-validation).
     pub bend_order: BendOrder,
     /// 1σ of each bend term's out-of-plane reach at the board's corner, mm: a
-    /// zero-mean prior on the bend amplitudes (off by default).
-    pub bend_prior_mm: Option<f64>,
+    /// zero-mean prior on the bend amplitudes (off by default), or "auto".
+    pub bend_prior_mm: Option<BendPrior>,
     /// 1σ of each bend term's change between consecutive frames, mm at the
     /// board's corner: temporal smoothness for video (off by default).
     pub bend_smoothness: Option<f64>,
@@ -93,6 +93,48 @@ impl TryFrom<RawBendOrder> for BendOrder {
                 "bend_order must be 2, 3, 4 or \"auto\" (got \"{}\")",
                 short(&s)
             )),
+        }
+    }
+}
+
+/// `[calibration] bend_prior_mm`: a σ in millimetres, or "auto" (estimated
+/// from the bends' spread beyond their noise, `solver::bend_prior`).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(try_from = "RawBendPrior")]
+pub enum BendPrior {
+    /// This σ, millimetres.
+    Mm(f64),
+    /// Empirical Bayes.
+    Auto,
+}
+
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum RawBendPrior {
+    Number(f64),
+    Name(String),
+}
+
+impl TryFrom<RawBendPrior> for BendPrior {
+    type Error = String;
+    fn try_from(r: RawBendPrior) -> std::result::Result<Self, String> {
+        match r {
+            RawBendPrior::Number(v) => Ok(BendPrior::Mm(v)),
+            RawBendPrior::Name(s) if s == "auto" => Ok(BendPrior::Auto),
+            RawBendPrior::Name(s) => Err(format!(
+                "bend_prior_mm must be a number of millimetres or \"auto\" (got \"{}\")",
+                short(&s)
+            )),
+        }
+    }
+}
+
+impl BendPrior {
+    /// The fixed σ, millimetres (`None` for "auto").
+    pub fn mm(self) -> Option<f64> {
+        match self {
+            BendPrior::Mm(v) => Some(v),
+            BendPrior::Auto => None,
         }
     }
 }
@@ -160,7 +202,8 @@ impl From<&CalibrationConfig> for SolverSettings {
             outlier_k: c.outlier_k,
             board: BoardPriors {
                 static_sigma_m: c.static_prior_mm.map(|v| v * 1e-3),
-                bend_sigma_m: c.bend_prior_mm.map(|v| v * 1e-3),
+                bend_sigma_m: c.bend_prior_mm.and_then(BendPrior::mm).map(|v| v * 1e-3),
+                bend_sigma_auto: c.bend_prior_mm == Some(BendPrior::Auto),
                 smoothness_sigma_m: c.bend_smoothness.map(|v| v * 1e-3),
                 geometry: c.geometry.clone(),
                 noise_px: c.detector_noise_px,
@@ -635,7 +678,7 @@ impl Checker<'_> {
     fn check_board_priors(&self, c: &CalibrationConfig) -> Result<()> {
         for (key, v) in [
             ("static_prior_mm", c.static_prior_mm),
-            ("bend_prior_mm", c.bend_prior_mm),
+            ("bend_prior_mm", c.bend_prior_mm.and_then(BendPrior::mm)),
             ("bend_smoothness", c.bend_smoothness),
             ("max_bend_mm", Some(c.max_bend_mm)),
         ] {

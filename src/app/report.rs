@@ -270,6 +270,14 @@ fn write_board(s: &mut String, c: &Calibration) {
             "  max out-of-plane deformation: {:.3} mm",
             c.max_out_of_plane() * 1e3
         );
+        let board = &c.settings.board;
+        if let (true, Some(sigma)) = (board.bend_sigma_auto, board.bend_sigma_m) {
+            let _ = writeln!(
+                s,
+                "  bend prior σ {:.3} mm per term at the board's corner, from the bends' spread beyond their noise (bend_prior_mm = \"auto\")",
+                sigma * 1e3
+            );
+        }
     }
     if c.method.has_correction() {
         let max = c

@@ -261,6 +261,9 @@ pub struct BoardPriors {
     pub static_sigma_m: Option<f64>,
     /// 1σ of each bend term's Δz at the board's corner, metres (`bend_prior_mm`).
     pub bend_sigma_m: Option<f64>,
+    /// `bend_prior_mm = "auto"`: the bend prior's σ is estimated from the data
+    /// (empirical Bayes) after a solve without it.
+    pub bend_sigma_auto: bool,
     /// 1σ of each bend term's change from one frame to the next, as Δz at the
     /// board's corner, metres (`bend_smoothness`).
     pub smoothness_sigma_m: Option<f64>,
@@ -282,6 +285,7 @@ impl BoardPriors {
     pub fn any(&self) -> bool {
         self.static_sigma_m.is_some()
             || self.bend_sigma_m.is_some()
+            || self.bend_sigma_auto
             || self.smoothness_sigma_m.is_some()
             || self.geometry.is_some()
     }
@@ -321,15 +325,25 @@ impl BoardPriors {
         let (Some(s), Some(noise)) = (sigma_m, self.noise_px) else {
             return Vec::new();
         };
-        let x = (target.cols as f64 - 1.0) / 2.0 * target.spacing;
-        let y = (target.rows as f64 - 1.0) / 2.0 * target.spacing;
-        // The paraboloid's x², y², xy, then degree by degree with falling powers of x.
-        let mut reach = vec![x * x, y * y, x * y];
-        for degree in 3..=4 {
-            for m in (0..=degree).rev() {
-                reach.push(x.powi(m) * y.powi(degree - m));
-            }
-        }
-        reach[..terms].iter().map(|r| noise * r / s).collect()
+        bend_reach(target, terms)
+            .iter()
+            .map(|r| noise * r / s)
+            .collect()
     }
+}
+
+/// Each of the first `terms` bend terms' monomial at the board's corner (|x| and
+/// |y| largest), metres^degree: a coefficient times it is that term's Δz there.
+pub fn bend_reach(target: &Target, terms: usize) -> Vec<f64> {
+    let x = (target.cols as f64 - 1.0) / 2.0 * target.spacing;
+    let y = (target.rows as f64 - 1.0) / 2.0 * target.spacing;
+    // The paraboloid's x², y², xy, then degree by degree with falling powers of x.
+    let mut reach = vec![x * x, y * y, x * y];
+    for degree in 3..=4 {
+        for m in (0..=degree).rev() {
+            reach.push(x.powi(m) * y.powi(degree - m));
+        }
+    }
+    reach.truncate(terms);
+    reach
 }

@@ -37,6 +37,27 @@ pub struct Trust {
 /// σ̂ is the noise of a weight-1 corner, the unit that the solver's weighted
 /// residuals, and so the covariance, are in.
 pub fn noise_from_neighbours(dataset: &Dataset, residuals: &[f64]) -> Option<f64> {
+    let d2 = second_differences(dataset, residuals);
+    (!d2.is_empty()).then(|| (d2.iter().sum::<f64>() / (12.0 * d2.len() as f64)).sqrt())
+}
+
+/// [`noise_from_neighbours`] from the median second difference: for Gaussian
+/// noise ‖d‖²/6σ² is χ² with 2 degrees of freedom, median 2 ln 2. A few corners
+/// hundreds of pixels off (a fit that put them at a pole of the rational model)
+/// leave it where the other corners put it, so it can weight priors.
+pub fn noise_from_neighbours_median(dataset: &Dataset, residuals: &[f64]) -> Option<f64> {
+    let mut d2 = second_differences(dataset, residuals);
+    if d2.is_empty() {
+        return None;
+    }
+    d2.sort_by(f64::total_cmp);
+    let median = d2[d2.len() / 2];
+    Some((median / (12.0 * std::f64::consts::LN_2)).sqrt())
+}
+
+/// ‖r_a − 2r + r_b‖² of every row and column triple of neighbouring corners of
+/// one view, on the weighted residuals.
+fn second_differences(dataset: &Dataset, residuals: &[f64]) -> Vec<f64> {
     let cols = dataset.target.cols;
     // Ordered, so that the sum, and every figure scaled by σ̂, is the same in
     // every run (a hash map's order changes from process to process).
@@ -47,7 +68,7 @@ pub fn noise_from_neighbours(dataset: &Dataset, residuals: &[f64]) -> Option<f64
             [r[0] * o.weight, r[1] * o.weight],
         );
     }
-    let (mut sum, mut triples) = (0.0, 0usize);
+    let mut out = Vec::new();
     for (&(camera, frame, corner), r) in &at {
         let col = corner % cols;
         // The corner as the middle of a horizontal and of a vertical triple.
@@ -55,12 +76,11 @@ pub fn noise_from_neighbours(dataset: &Dataset, residuals: &[f64]) -> Option<f64
         let vertical = (corner >= cols).then(|| (corner - cols, corner + cols));
         for (a, b) in [horizontal, vertical].into_iter().flatten() {
             if let (Some(p), Some(q)) = (at.get(&(camera, frame, a)), at.get(&(camera, frame, b))) {
-                sum += (p[0] - 2.0 * r[0] + q[0]).powi(2) + (p[1] - 2.0 * r[1] + q[1]).powi(2);
-                triples += 1;
+                out.push((p[0] - 2.0 * r[0] + q[0]).powi(2) + (p[1] - 2.0 * r[1] + q[1]).powi(2));
             }
         }
     }
-    (triples > 0).then(|| (sum / (12.0 * triples as f64)).sqrt())
+    out
 }
 
 /// Residuals (u, v per observation, pixels) times their observation's weight:

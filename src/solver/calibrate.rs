@@ -488,6 +488,70 @@ fn without_unposed_frames(
     (dataset.subset(&kept), views)
 }
 
+/// With `bend_prior_mm = "auto"`, the bend prior's σ from the solve without it.
+fn auto_bend_sigma(
+    dataset: &Dataset,
+    state: &State,
+    request: &Request,
+    (gauge, frozen, _): &(Vec<usize>, Vec<usize>, Vec<f64>),
+) -> Option<f64> {
+    let board = &request.settings.board;
+    if !board.bend_sigma_auto || board.bend_sigma_m.is_some() || !request.method.has_paraboloid() {
+        return None;
+    }
+    let problem = Problem {
+        dataset,
+        method: request.method,
+        gauge: gauge.clone(),
+        frozen: frozen.clone(),
+        hold: Hold::default(),
+    };
+    crate::solver::bend_prior::estimate_bend_sigma(
+        &problem,
+        state,
+        &request.settings,
+        board.noise_px?,
+    )
+}
+
+/// Solves again with the bend prior of σ `sigma` (metres) and keeps that unless
+/// it fits the observations clearly worse than the solve without it (`free`): a
+/// prior the bends agree with costs at most about one σ̂² of squared residual
+/// per bend value it holds. The rational model's near-degenerate distortion can
+/// trade bends for distortion under any prior; then the free solve stands.
+fn with_auto_bend_prior(
+    dataset: &Dataset,
+    state: &mut State,
+    request: &mut Request,
+    sigma: f64,
+    free: (Vec<usize>, Vec<usize>, Vec<f64>),
+    stages: &mut Vec<Stage>,
+    warnings: &mut Vec<String>,
+) -> Result<(Vec<usize>, Vec<usize>, Vec<f64>)> {
+    let saved = state.clone();
+    request.settings.board.bend_sigma_m = Some(sigma);
+    let held = solve_method(dataset, state, request, stages, warnings)?;
+    let sum_sq = |r: &[f64]| -> f64 {
+        crate::model::trust::weighted(dataset, r)
+            .iter()
+            .map(|v| v * v)
+            .sum()
+    };
+    let noise = request.settings.board.noise_px.unwrap_or(f64::NAN);
+    let bend_values = (request.method.info().frame_params * dataset.num_frames()) as f64;
+    let cost = (sum_sq(&held.2) - sum_sq(&free.2)) / (noise * noise);
+    if cost <= bend_values {
+        return Ok(held);
+    }
+    *state = saved;
+    request.settings.board.bend_sigma_m = None;
+    warnings.push(format!(
+        "bend_prior_mm = \"auto\": a bend prior of {:.3} mm fits the observations worse by {cost:.0} σ̂² (more than its {bend_values:.0} bend values explain); the bends are left free",
+        sigma * 1e3
+    ));
+    Ok(free)
+}
+
 /// The settings of the `standard` stage.
 fn warm_start_settings(request: &Request) -> SolverSettings {
     if request.method == Method::Standard {
@@ -581,12 +645,25 @@ pub fn fit(dataset: &Dataset, request: &Request) -> Result<Calibration> {
     robust::check_stage(Method::Standard, &report, true)?;
     stages.push(Stage::new(Method::Standard, &report));
 
-    let request = &with_prior_noise(request, &dataset, &report.residuals);
+    let mut request = with_prior_noise(request, &dataset, &report.residuals);
     let (gauge, frozen, residuals) = if request.method == Method::Standard {
         (Vec::new(), Vec::new(), report.residuals)
     } else {
-        solve_method(&dataset, &mut state, request, &mut stages, &mut warnings)?
+        let solved = solve_method(&dataset, &mut state, &request, &mut stages, &mut warnings)?;
+        match auto_bend_sigma(&dataset, &state, &request, &solved) {
+            Some(sigma) => with_auto_bend_prior(
+                &dataset,
+                &mut state,
+                &mut request,
+                sigma,
+                solved,
+                &mut stages,
+                &mut warnings,
+            )?,
+            None => solved,
+        }
     };
+    let request = &request;
     let (dataset, residuals, frozen, rejected) = finish_robustly(
         dataset,
         &mut state,
@@ -629,11 +706,13 @@ pub fn fit(dataset: &Dataset, request: &Request) -> Result<Calibration> {
 
 /// The request with the noise that weights the board priors: the configured one,
 /// else estimated from `standard`'s residuals of neighbouring corners (which a
-/// smooth model error hardly touches, see `trust::noise_from_neighbours`).
+/// smooth model error hardly touches, see `trust::noise_from_neighbours`), by
+/// their median: `standard` can leave a few corners far off (the rational model
+/// has poles), and a prior weighted by their noise would hold everything flat.
 fn with_prior_noise(request: &Request, dataset: &Dataset, residuals: &[f64]) -> Request {
     let mut r = request.clone();
     if r.settings.board.any() && r.settings.board.noise_px.is_none() {
-        let noise = crate::model::trust::noise_from_neighbours(dataset, residuals)
+        let noise = crate::model::trust::noise_from_neighbours_median(dataset, residuals)
             .unwrap_or_else(|| rmse(residuals) / std::f64::consts::SQRT_2);
         r.settings.board.noise_px = Some(noise);
     }
