@@ -517,8 +517,9 @@ fn auto_bend_sigma(
 /// Solves again with the bend prior of σ `sigma` (metres) and keeps that unless
 /// it fits the observations clearly worse than the solve without it (`free`): a
 /// prior the bends agree with costs at most about one σ̂² of squared residual
-/// per bend value it holds. The rational model's near-degenerate distortion can
-/// trade bends for distortion under any prior; then the free solve stands.
+/// per bend value it holds. A safety net: a prior the data contradict (as one
+/// weighted by a wild noise estimate did, holding 7 mm bends flat) is dropped
+/// and the free solve stands.
 fn with_auto_bend_prior(
     dataset: &Dataset,
     state: &mut State,
