@@ -488,6 +488,22 @@ fn without_unposed_frames(
     (dataset.subset(&kept), views)
 }
 
+/// The problem of `method` with its gauge and frozen corners, nothing else held.
+fn method_problem<'a>(
+    dataset: &'a Dataset,
+    method: Method,
+    gauge: &[usize],
+    frozen: &[usize],
+) -> Problem<'a> {
+    Problem {
+        dataset,
+        method,
+        gauge: gauge.to_vec(),
+        frozen: frozen.to_vec(),
+        hold: Hold::default(),
+    }
+}
+
 /// With `bend_prior_mm = "auto"`, the bend prior's σ from the solve without it.
 fn auto_bend_sigma(
     dataset: &Dataset,
@@ -499,13 +515,7 @@ fn auto_bend_sigma(
     if !board.bend_sigma_auto || board.bend_sigma_m.is_some() || !request.method.has_paraboloid() {
         return None;
     }
-    let problem = Problem {
-        dataset,
-        method: request.method,
-        gauge: gauge.clone(),
-        frozen: frozen.clone(),
-        hold: Hold::default(),
-    };
+    let problem = method_problem(dataset, request.method, gauge, frozen);
     crate::solver::bend_prior::estimate_bend_sigma(
         &problem,
         state,
@@ -593,13 +603,7 @@ fn solve_method(
             frozen.len()
         ));
     }
-    let problem = Problem {
-        dataset,
-        method: request.method,
-        gauge: gauge.clone(),
-        frozen: frozen.clone(),
-        hold: Hold::default(),
-    };
+    let problem = method_problem(dataset, request.method, &gauge, &frozen);
     if request.settings.board.smoothness_sigma_m.is_some() {
         // The smoothness prior is robust, so not convex: started from unbent
         // frames (all alike, in its quadratic core) it holds bends the data want
