@@ -11,6 +11,8 @@
 #include <ceres/sized_cost_function.h>
 
 #include <array>
+#include <utility>
+#include <vector>
 
 #include "deformcal/cpp/camera.h"
 
@@ -82,6 +84,30 @@ class BendSmoothness : public ceres::SizedCostFunction<E, kPoseSize + E, kPoseSi
 
  private:
   std::array<double, E> weight_;
+};
+
+// A zero-mean prior on a lens's parameters (one camera's whole intrinsics block;
+// weight 0 on a value: no prior on it).  The rational model's denominator terms
+// trade off against its numerator's over the range the corners cover, and this
+// holds the model where the data leave it free.
+class LensPrior : public ceres::CostFunction {
+ public:
+  explicit LensPrior(std::vector<double> weight) : weight_(std::move(weight)) {
+    set_num_residuals(static_cast<int>(weight_.size()));
+    mutable_parameter_block_sizes()->push_back(static_cast<int>(weight_.size()));
+  }
+  bool Evaluate(double const* const* p, double* r, double** jacobians) const override {
+    const size_t n = weight_.size();
+    for (size_t k = 0; k < n; ++k) r[k] = weight_[k] * p[0][k];
+    if (jacobians != nullptr && jacobians[0] != nullptr) {
+      for (size_t k = 0; k < n * n; ++k) jacobians[0][k] = 0.0;
+      for (size_t k = 0; k < n; ++k) jacobians[0][k * n + k] = weight_[k];
+    }
+    return true;
+  }
+
+ private:
+  std::vector<double> weight_;
 };
 
 }  // namespace deformcal

@@ -19,12 +19,24 @@ const PLANTED_OUTLIERS: usize = 4;
 
 /// Calibrates a synthetic rigid-board set through `models` with the default robust
 /// settings (Cauchy loss, outlier rejection) run to tight tolerances, with a few
-/// gross outliers planted, and writes it into a fresh directory.
+/// gross outliers planted, and writes it into a fresh directory; without the
+/// lens prior, so that the problem is mrcal's own.
 fn calibrated(
     preset: Preset,
     models: &[LensModel],
     method: Method,
     seed: u64,
+) -> (tempfile::TempDir, Calibration) {
+    calibrated_with(preset, models, method, seed, None)
+}
+
+/// [`calibrated`] with the lens prior's σ given.
+fn calibrated_with(
+    preset: Preset,
+    models: &[LensModel],
+    method: Method,
+    seed: u64,
+    lens_prior_sigma: Option<f64>,
 ) -> (tempfile::TempDir, Calibration) {
     let mut g = Generator::new(preset, Some(12), seed).with_models(models);
     g.bend_scale = 0.0;
@@ -38,6 +50,7 @@ fn calibrated(
         parameter_tolerance: 1e-15,
         gradient_tolerance: 1e-15,
         max_iterations: 500,
+        lens_prior_sigma,
         ..SolverSettings::default()
     };
     let request = Request {
@@ -205,6 +218,18 @@ fn a_problem_mrcal_cannot_represent_is_left_out_with_the_reason() {
     assert_eq!(
         absent_comment(dir.path(), "cam0").as_deref(),
         Some("mrcal's board is rigid up to its own two-parameter calobject_warp, and method `static` moves every corner by its own offset")
+    );
+    // The default lens prior on opencv8's denominator: no term of mrcal's.
+    let (dir, _) = calibrated_with(
+        Preset::T2,
+        &[LensModel::OpenCv8],
+        Method::Standard,
+        3,
+        SolverSettings::default().lens_prior_sigma,
+    );
+    assert_eq!(
+        absent_comment(dir.path(), "cam0").as_deref(),
+        Some("our problem holds k4, k5, k6 of `opencv8` with a lens prior (lens_prior = 0.1), which mrcal's problem has no term for; lens_prior = \"none\" gives mrcal's problem")
     );
     // A rig of two lens models: mrcal solves with one.
     let (dir, _) = calibrated(

@@ -58,6 +58,9 @@ pub struct CalibrationConfig {
     pub bend_smoothness: Option<f64>,
     /// Frames bent more than this (mm, largest |Δz| over the corners) are flagged.
     pub max_bend_mm: f64,
+    /// 1σ of the zero-mean prior on the lens parameters the data leave nearly
+    /// free (`opencv8`'s k4–k6), or "none" (OpenCV's and mrcal's exact problem).
+    pub lens_prior: LensPrior,
     /// The measured board of `[target] geometry` (not a key of this section).
     #[serde(skip)]
     pub geometry: Option<std::sync::Arc<BoardGeometry>>,
@@ -142,6 +145,35 @@ impl BendPrior {
 /// Default of `max_bend_mm`.
 pub const DEFAULT_MAX_BEND_MM: f64 = 5.0;
 
+/// `[calibration] lens_prior`: a σ, or "none".
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(try_from = "RawLensPrior")]
+pub struct LensPrior(pub Option<f64>);
+
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum RawLensPrior {
+    Number(f64),
+    Name(String),
+}
+
+impl TryFrom<RawLensPrior> for LensPrior {
+    type Error = String;
+    fn try_from(r: RawLensPrior) -> std::result::Result<Self, String> {
+        match r {
+            RawLensPrior::Number(v) if v.is_finite() && v > 0.0 => Ok(LensPrior(Some(v))),
+            RawLensPrior::Name(s) if s == "none" => Ok(LensPrior(None)),
+            RawLensPrior::Number(v) => Err(format!(
+                "lens_prior must be a positive number or \"none\" (got {v})"
+            )),
+            RawLensPrior::Name(s) => Err(format!(
+                "lens_prior must be a positive number or \"none\" (got \"{}\")",
+                short(&s)
+            )),
+        }
+    }
+}
+
 impl Default for CalibrationConfig {
     fn default() -> Self {
         // One set of solver defaults: the solver's own.
@@ -169,6 +201,7 @@ impl Default for CalibrationConfig {
             bend_prior_mm: None,
             bend_smoothness: None,
             max_bend_mm: DEFAULT_MAX_BEND_MM,
+            lens_prior: LensPrior(s.lens_prior_sigma),
             geometry: None,
         }
     }
@@ -209,6 +242,7 @@ impl From<&CalibrationConfig> for SolverSettings {
                 noise_px: c.detector_noise_px,
                 max_bend_m: Some(c.max_bend_mm * 1e-3),
             },
+            lens_prior_sigma: c.lens_prior.0,
         }
     }
 }

@@ -211,6 +211,16 @@ fn write_cameras(s: &mut String, c: &Calibration) {
             cam.model,
             values.join("  ")
         );
+        if let (true, Some(sigma)) = (
+            c.settings.lens_prior_on(&[cam.model]),
+            c.settings.lens_prior_sigma,
+        ) {
+            let _ = writeln!(
+                s,
+                "    lens prior: {} held towards 0 with σ {sigma} where the corners leave them free (lens_prior = \"none\": OpenCV's problem)",
+                cam.model.info().prior_params.join(", ")
+            );
+        }
         if let Some(u) = u {
             let _ = writeln!(
                 s,

@@ -42,6 +42,10 @@ pub struct LensInfo {
     pub ros: Option<&'static str>,
     /// mrcal's lens model, where mrcal has it.
     pub mrcal: Option<&'static str>,
+    /// Parameters the lens prior (`[calibration] lens_prior`) pulls towards zero:
+    /// those the data leave nearly free, such as the rational model's denominator,
+    /// which trades off against its numerator over the range the corners cover.
+    pub prior_params: &'static [&'static str],
 }
 
 impl LensModel {
@@ -63,6 +67,7 @@ impl LensModel {
                 pinhole_like: true,
                 ros: None,
                 mrcal: None,
+                prior_params: &[],
             },
             LensModel::OpenCv5 => LensInfo {
                 name: "opencv5",
@@ -70,6 +75,7 @@ impl LensModel {
                 pinhole_like: true,
                 ros: Some("plumb_bob"),
                 mrcal: Some("LENSMODEL_OPENCV5"),
+                prior_params: &[],
             },
             LensModel::OpenCv8 => LensInfo {
                 name: "opencv8",
@@ -79,6 +85,7 @@ impl LensModel {
                 pinhole_like: true,
                 ros: Some("rational_polynomial"),
                 mrcal: Some("LENSMODEL_OPENCV8"),
+                prior_params: &["k4", "k5", "k6"],
             },
             LensModel::Kb4 => LensInfo {
                 name: "kb4",
@@ -86,6 +93,7 @@ impl LensModel {
                 pinhole_like: false,
                 ros: Some("equidistant"),
                 mrcal: None,
+                prior_params: &[],
             },
             LensModel::DoubleSphere => LensInfo {
                 name: "ds",
@@ -93,6 +101,7 @@ impl LensModel {
                 pinhole_like: false,
                 ros: None,
                 mrcal: None,
+                prior_params: &[],
             },
         }
     }

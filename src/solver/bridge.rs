@@ -63,6 +63,9 @@ pub mod ffi {
         /// Cauchy scale of the smoothness prior, pixels (0: Gaussian): a jump
         /// between frames that are not consecutive in time costs little.
         bend_smoothness_loss: f64,
+        /// Zero-mean prior on each value of the intrinsics section, weight
+        /// σ_noise/σ_prior (empty: none; 0: none on that value).
+        lens_prior_weight: Vec<f64>,
     }
 
     /// Solver settings passed to Ceres.

@@ -279,6 +279,28 @@ fn malformed_priors_are_errors() {
     d.bend_smoothness_weight = vec![1.0; 3];
     d.bend_smoothness_loss = f64::NAN;
     assert!(error_of(&mut d, &options()).contains("bend_smoothness_loss"));
+    let mut d = tiny("standard");
+    d.lens_prior_weight = vec![1.0; 6];
+    assert!(error_of(&mut d, &options()).contains("lens_prior_weight"));
+    d.lens_prior_weight = vec![-1.0; 7];
+    assert!(error_of(&mut d, &options()).contains("must not be negative"));
+}
+
+#[test]
+fn a_tight_lens_prior_holds_its_parameters_at_zero() {
+    // Four corners leave k1 of radial3 undetermined: it stays where it starts
+    // without the prior, and goes to the prior's zero with it.
+    let solved_k1 = |weight: Vec<f64>| {
+        let mut d = tiny("standard");
+        d.params[4] = 0.01;
+        d.lens_prior_weight = weight;
+        bridge::solve(&mut d, &options()).unwrap();
+        d.params[4]
+    };
+    let mut weight = vec![0.0; 7];
+    weight[4] = 1e6;
+    let (free, held) = (solved_k1(Vec::new()), solved_k1(weight));
+    assert!(free.abs() > 1e-4 && held.abs() < 1e-9, "{free} {held}");
 }
 
 #[test]

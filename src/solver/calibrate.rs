@@ -630,6 +630,7 @@ pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {
 /// [`calibrate`] without the covariance, for fits only their parameters matter
 /// of (`auto`'s cross-validation folds).
 pub fn fit(dataset: &Dataset, request: &Request) -> Result<Calibration> {
+    let request_in = request;
     let start = Instant::now();
     let mut warnings = Vec::new();
     let dataset = robust::drop_outside_image(dataset, &mut warnings)?;
@@ -652,7 +653,17 @@ pub fn fit(dataset: &Dataset, request: &Request) -> Result<Calibration> {
 
     let mut request = with_prior_noise(request, &dataset, &report.residuals);
     let (gauge, frozen, residuals) = if request.method == Method::Standard {
-        (Vec::new(), Vec::new(), report.residuals)
+        let residuals = if lens_prior_reweighted(request_in, &request, &dataset) {
+            // The lens prior weighted by the estimated noise, not the provisional
+            // one: a polish from the optimum, which may take no step at all.
+            let report = standard.solve(&mut state, &request.settings)?;
+            robust::check_stage(Method::Standard, &report, false)?;
+            stages.push(Stage::new(Method::Standard, &report));
+            report.residuals
+        } else {
+            report.residuals
+        };
+        (Vec::new(), Vec::new(), residuals)
     } else {
         let solved = solve_method(&dataset, &mut state, &request, &mut stages, &mut warnings)?;
         match auto_bend_sigma(&dataset, &state, &request, &solved) {
@@ -716,12 +727,22 @@ pub fn fit(dataset: &Dataset, request: &Request) -> Result<Calibration> {
 /// has poles), and a prior weighted by their noise would hold everything flat.
 fn with_prior_noise(request: &Request, dataset: &Dataset, residuals: &[f64]) -> Request {
     let mut r = request.clone();
-    if r.settings.board.any() && r.settings.board.noise_px.is_none() {
+    let models: Vec<_> = dataset.cameras.iter().map(|c| c.model).collect();
+    let priors = r.settings.board.any() || r.settings.lens_prior_on(&models);
+    if priors && r.settings.board.noise_px.is_none() {
         let noise = crate::model::trust::noise_from_neighbours_median(dataset, residuals)
             .unwrap_or_else(|| rmse(residuals) / std::f64::consts::SQRT_2);
         r.settings.board.noise_px = Some(noise);
     }
     r
+}
+
+/// Whether the lens prior's weight changed from the first `standard` solve
+/// (`before`) to the method's (`after`): the noise was estimated in between.
+fn lens_prior_reweighted(before: &Request, after: &Request, dataset: &Dataset) -> bool {
+    let models: Vec<_> = dataset.cameras.iter().map(|c| c.model).collect();
+    after.settings.lens_prior_on(&models)
+        && before.settings.board.noise_px != after.settings.board.noise_px
 }
 
 /// What [`finish_robustly`] hands back: the data kept, their residuals, the frozen

@@ -203,6 +203,17 @@ fn accumulate(
     Ok(())
 }
 
+/// The lens prior's information (its weight², a diagonal on the intrinsics it
+/// holds): part of H, the curvature the fit solves with, never of the noise term
+/// JᵀW²J, so Σ_θ is the variance of the estimate that the prior regularises.
+fn add_lens_prior(n: &mut Normal, weights: &[f64]) {
+    for col in 0..n.params.len() {
+        if let (Some(&w), Role::Kept(k)) = (weights.get(n.params[col]), n.roles[col]) {
+            n.a[(k, k)] += w * w;
+        }
+    }
+}
+
 /// In-place lower Cholesky factor of a symmetric m × m row-major matrix; `Err(i)`
 /// at the first pivot below [`MIN_PIVOT`] (the matrix is Jacobi-scaled, unit diagonal).
 fn cholesky(a: &mut [f64], m: usize) -> Result<(), usize> {
@@ -440,6 +451,7 @@ pub fn unit_covariance(
     }
     let weights = loss_weights(d, settings, &e.residuals);
     let mut n = normal_matrix(&e, &layout, &weights)?;
+    add_lens_prior(&mut n, &problem.lens_prior_weights(settings));
     let scale = jacobi_scale(d, &layout, &mut n)?;
     eliminate(d, &layout, &mut n)?;
     let targets: Vec<usize> = (0..n.params.len())
@@ -521,6 +533,7 @@ pub fn unit_correction_std(
         .map_err(|e| UncertaintyError::Jacobian(e.to_string()))?;
     let weights = loss_weights(d, settings, &e.residuals);
     let mut n = normal_matrix(&e, &layout, &weights)?;
+    add_lens_prior(&mut n, &problem.lens_prior_weights(settings));
     let targets: Vec<usize> = (0..n.params.len())
         .filter(|&col| n.params[col] >= layout.corrections)
         .collect();

@@ -55,7 +55,19 @@ pub struct SolverSettings {
     pub outlier_k: f64,
     /// Priors on the board model and a measured board (all off by default).
     pub board: BoardPriors,
+    /// 1σ of the lens prior on the registry's `prior_params` (`[calibration]
+    /// lens_prior`; `None`: off). On by default: see [`DEFAULT_LENS_PRIOR`].
+    pub lens_prior_sigma: Option<f64>,
 }
+
+/// The lens prior's default σ. Weak: at the typical noise it costs about what one
+/// corner's residual does, so it only acts where the data leave a parameter free
+/// (`opencv8`'s k4–k6: 32 synthetic sets, README "Lens models").
+pub const DEFAULT_LENS_PRIOR: f64 = 0.1;
+
+/// The pixel noise that weights the lens prior before the pipeline has estimated
+/// it (the first `standard` solve): a typical sub-pixel corner detector's.
+pub const PROVISIONAL_NOISE_PX: f64 = 0.1;
 
 impl Default for SolverSettings {
     fn default() -> Self {
@@ -73,6 +85,7 @@ impl Default for SolverSettings {
             per_corner_blocks: false,
             outlier_k: 4.0,
             board: BoardPriors::default(),
+            lens_prior_sigma: Some(DEFAULT_LENS_PRIOR),
         }
     }
 }
@@ -86,6 +99,11 @@ impl SolverSettings {
             Loss::None => 1.0,
             Loss::Cauchy => 1.0 / (1.0 + (r / self.loss_scale_px).powi(2)),
         }
+    }
+
+    /// Whether the lens prior acts on some camera of `models`.
+    pub fn lens_prior_on(&self, models: &[LensModel]) -> bool {
+        self.lens_prior_sigma.is_some() && models.iter().any(|m| !m.info().prior_params.is_empty())
     }
 
     fn options(&self) -> SolveOptions {
@@ -290,7 +308,10 @@ impl Problem<'_> {
         let b = &settings.board;
         let t = self.dataset.target;
         let info = self.method.info();
-        let mut d = ProblemData::default();
+        let mut d = ProblemData {
+            lens_prior_weight: self.lens_prior_weights(settings),
+            ..ProblemData::default()
+        };
         if b.noise_px.is_none() || !b.any() {
             return d;
         }
@@ -305,6 +326,29 @@ impl Problem<'_> {
             d.bend_smoothness_loss = b.noise_px.unwrap_or(0.0);
         }
         d
+    }
+
+    /// Weights σ_noise/σ of the lens prior per value of the intrinsics section
+    /// (empty: no camera's model has one, or it is off). Before the noise is
+    /// estimated, [`PROVISIONAL_NOISE_PX`] stands in for it.
+    pub fn lens_prior_weights(&self, settings: &SolverSettings) -> Vec<f64> {
+        let Some(sigma) = settings.lens_prior_sigma else {
+            return Vec::new();
+        };
+        let models = &self.layout().lens_models;
+        if models.iter().all(|m| m.info().prior_params.is_empty()) {
+            return Vec::new();
+        }
+        let w = settings.board.noise_px.unwrap_or(PROVISIONAL_NOISE_PX) / sigma;
+        models
+            .iter()
+            .flat_map(|m| {
+                let prior = m.info().prior_params;
+                m.param_names()
+                    .iter()
+                    .map(move |p| if prior.contains(p) { w } else { 0.0 })
+            })
+            .collect()
     }
 
     /// Refines `state` in place; an unusable solve is an error, a non-converged one is reported.

@@ -176,6 +176,8 @@ pub fn exact_settings() -> SolverSettings {
         max_iterations: 500,
         // The peers reject nothing: compare fits of the same observations.
         outlier_k: 0.0,
+        // Nor do they hold a lens parameter with a prior.
+        lens_prior_sigma: None,
         ..SolverSettings::default()
     }
 }

@@ -50,6 +50,13 @@ fn serialise(c: &Calibration) -> Result<OptimizationInputs, String> {
         ));
     }
     let model = common_model(&c.dataset)?;
+    if c.settings.lens_prior_on(&[model]) {
+        let prior = model.info().prior_params.join(", ");
+        return Err(format!(
+            "our problem holds {prior} of `{model}` with a lens prior (lens_prior = {}), which mrcal's problem has no term for; lens_prior = \"none\" gives mrcal's problem",
+            c.settings.lens_prior_sigma.unwrap_or_default()
+        ));
+    }
     let views = board_views(c)?;
     let (core, distortions, note) = optimised(&c.dataset, model);
     let mut entries = problem_arrays(c, model, &views)?;
