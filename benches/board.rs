@@ -1,6 +1,9 @@
 //! The board-model experiments of issue 15 (beyond the paper), each printed as a
 //! table. `cargo bench --bench board -- <experiment>` with `prior` (the 50 × 25
-//! protocol on T1–T4 and a rigid board, with and without `static_prior_mm`),
+//! protocol on T1–T4 and a rigid board: no prior, `static_prior_mm` of `PRIOR`
+//! mm, `"auto"`, and with `bend_prior_mm = "auto"` too; `PRIORS=0,2` picks rows),
+//! `reference` (the time of `static_prior_mm = "auto"` on the 650-image
+//! reference; not in `all`),
 //! `t4` (why `static` loses on T4: the protocol with one change at a time; not in
 //! `all`),
 //! `order` (the `warped` preset: bend orders 2–4), `auto` (`bend_order = "auto"`
@@ -75,8 +78,18 @@ fn summarise(rows: &[deformcal::app::protocol::Row]) -> Vec<(Method, f64, f64, u
 }
 
 fn prior() {
+    let prior = std::env::var("PRIOR").unwrap_or_else(|_| "0.05".into());
+    let auto = "static_prior_mm = \"auto\"".to_string();
+    let configs = [
+        ("none", String::new()),
+        (&*format!("static {prior} mm"), format!("static_prior_mm = {prior}")),
+        ("static auto", auto.clone()),
+        ("static + bend auto", format!("{auto}\nbend_prior_mm = \"auto\"")),
+    ]
+    .map(|(a, b)| (a.to_string(), b));
+    let only = std::env::var("PRIORS").ok();
     println!(
-        "## static prior: truth mapping error (px), {} × 25 protocol",
+        "## board priors: truth mapping error (px), {} × 25 protocol",
         subsets()
     );
     println!(
@@ -90,17 +103,20 @@ fn prior() {
         ("T4", "t4", 1.0),
         ("rigid (T2 board, no bend)", "t2", 0.0),
     ] {
-        let prior = std::env::var("PRIOR").unwrap_or_else(|_| "0.1".into());
-        for extra in [String::new(), format!("static_prior_mm = {prior}")] {
-            let r = protocol(preset, &extra, scale);
+        for (label, extra) in &configs {
+            // `PRIORS=0,2,3` runs only those rows of each target.
+            let index = configs.iter().position(|c| &c.0 == label).unwrap_or(0);
+            if only
+                .as_deref()
+                .is_some_and(|o| !o.split(',').any(|i| i == index.to_string()))
+            {
+                continue;
+            }
+            let start = std::time::Instant::now();
+            let r = protocol(preset, extra, scale);
             let cell = |i: usize| format!("{:.3} ± {:.3}", r[i].1, r[i].2);
             println!(
-                "| {name} | {} | {} | {} | {} | {} | {:.2} | {:.2} |",
-                if extra.is_empty() {
-                    "none".into()
-                } else {
-                    format!("{prior} mm")
-                },
+                "| {name} | {label} | {} | {} | {} | {} | {:.2} | {:.2} |",
                 cell(0),
                 cell(1),
                 cell(2),
@@ -108,8 +124,37 @@ fn prior() {
                 r[1].1 / r[0].1,
                 r[3].1 / r[2].1
             );
+            eprintln!("{name} {label}: {:.0} s", start.elapsed().as_secs_f64());
         }
     }
+}
+
+/// `static_prior_mm = "auto"` on the protocol's 650-image reference set
+/// (`static`): the calibration's time with and without it, and the estimate's.
+fn reference_timing() {
+    use deformcal::solver::auto_prior::AutoPrior;
+    let (reference, truth) = Generator::new(Preset::Reference, None, 1).generate();
+    let plain = SolverSettings::default();
+    let mut auto = SolverSettings::default();
+    auto.board.static_sigma_auto = true;
+    let t = std::time::Instant::now();
+    let free = run(&reference, Method::Static, &plain);
+    let t_free = t.elapsed().as_secs_f64();
+    let t = std::time::Instant::now();
+    let with = run(&reference, Method::Static, &auto);
+    let t_auto = t.elapsed().as_secs_f64();
+    let t = std::time::Instant::now();
+    let noise = with.settings.board.noise_px.expect("a noise");
+    let e = AutoPrior::Static.estimate(&free.problem(), &free.state, &free.settings, noise);
+    let t_estimate = t.elapsed().as_secs_f64();
+    println!("## static_prior_mm = \"auto\" on the 650-image reference (`static`)");
+    println!(
+        "calibration {t_free:.1} s without, {t_auto:.1} s with (estimate alone {t_estimate:.2} s); σ {:.4} mm over {} values; mapping error {:.3} → {:.3} px",
+        e.map_or(f64::NAN, |e| e.sigma * 1e3),
+        e.map_or(0, |e| e.values),
+        truth_error(&free, &truth),
+        truth_error(&with, &truth)
+    );
 }
 
 /// Why `static` loses to `standard` on T4: the protocol under one change at a time.
@@ -487,6 +532,9 @@ fn main() {
     }
     if which == "t4" {
         t4();
+    }
+    if which == "reference" {
+        reference_timing();
     }
     if all || which == "order" {
         order();
