@@ -697,7 +697,10 @@ impl Checker<'_> {
     /// The board priors' σ: positive millimetres.
     fn check_board_priors(&self, c: &CalibrationConfig) -> Result<()> {
         for (key, v) in [
-            ("static_prior_mm", c.static_prior_mm.and_then(PriorSigma::mm)),
+            (
+                "static_prior_mm",
+                c.static_prior_mm.and_then(PriorSigma::mm),
+            ),
             ("bend_prior_mm", c.bend_prior_mm.and_then(PriorSigma::mm)),
             ("bend_smoothness", c.bend_smoothness),
             ("max_bend_mm", Some(c.max_bend_mm)),

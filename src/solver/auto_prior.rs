@@ -90,8 +90,8 @@ impl AutoPrior {
 }
 
 /// The σ of zero-mean true values from unbiased estimates Δ of them whose
-/// errors have covariance C, by the moments: with P = C⁻¹, E[ΔᵀPΔ] = σ²·tr P
-/// + n over n values, so σ² = (ΔᵀPΔ − n) / tr P, at least `floor`. For a
+/// errors have covariance C, by the moments: over n values and with P = C⁻¹,
+/// E[ΔᵀPΔ] = σ²·tr P + n, so σ² = (ΔᵀPΔ − n) / tr P, at least `floor`. For a
 /// diagonal C this is the precision-weighted mean of Δ² − var, so that a barely
 /// determined value cannot drown the others; for a full C the same holds for
 /// barely determined directions, which a diagonal would smear over every value.
@@ -125,7 +125,12 @@ pub fn estimate_static_sigma(
     let delta = DVector::from_iterator(params.len(), params.iter().map(|&p| values[p]));
     let n2 = noise_px * noise_px;
     let quadratic = delta.dot(&(&info * &delta)) / n2;
-    excess_sigma(quadratic, info.trace() / n2, params.len(), MIN_STATIC_SIGMA_M)
+    excess_sigma(
+        quadratic,
+        info.trace() / n2,
+        params.len(),
+        MIN_STATIC_SIGMA_M,
+    )
 }
 
 /// The bend prior's σ (Δz of each term at the board's corner) over every frame

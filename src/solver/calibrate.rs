@@ -8,10 +8,10 @@ use crate::model::pose::Pose;
 use crate::model::selection::Selection;
 use crate::model::uncertainty::{IntrinsicsCovariance, UncertaintyError};
 use crate::model::{fisheye_init, zhang};
+use crate::solver::auto_prior::{AutoPrior, Estimate};
 use crate::solver::problem::{
     choose_gauge, rmse, underobserved_corners, Hold, Problem, SolveReport, SolverSettings, State,
 };
-use crate::solver::auto_prior::{AutoPrior, Estimate};
 use crate::solver::robust;
 use nalgebra::{Matrix3, Vector2};
 use std::collections::HashMap;
