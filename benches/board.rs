@@ -3,7 +3,8 @@
 //! protocol on T1–T4 and a rigid board: no prior, `static_prior_mm` of `PRIOR`
 //! mm, `"auto"`, and with `bend_prior_mm = "auto"` too; `PRIORS=0,2` picks rows),
 //! `reference` (the time of `static_prior_mm = "auto"` on the 650-image
-//! reference; not in `all`),
+//! reference; not in `all`), `size` (the static prior against the number of
+//! images on a rigid board; not in `all`),
 //! `t4` (why `static` loses on T4: the protocol with one change at a time; not in
 //! `all`),
 //! `order` (the `warped` preset: bend orders 2–4), `auto` (`bend_order = "auto"`
@@ -165,6 +166,59 @@ fn reference_timing() {
         truth_error(&with, &truth),
         truth_error(&fixed, &truth)
     );
+}
+
+/// The static prior against the number of images: rigid T2 boards (the
+/// presets' print error), `static` and `full` without a prior, with 0.05 mm
+/// and with "auto"; mean truth mapping error over `SUBSETS` (≤ 5) seeds.
+fn size() {
+    let seeds: Vec<u64> = (1..=subsets().min(5) as u64).collect();
+    println!(
+        "## static prior against the number of images (rigid T2 board, seeds {seeds:?}): truth mapping error (px)"
+    );
+    println!("| images | standard | static | static 0.05 mm | static auto | full | full 0.05 mm | full auto | σ auto (static, full) mm |");
+    println!("|---|---|---|---|---|---|---|---|---|");
+    let mut fixed = SolverSettings::default();
+    fixed.board.static_sigma_m = Some(0.05e-3);
+    let mut auto = SolverSettings::default();
+    auto.board.static_sigma_auto = true;
+    let plain = SolverSettings::default();
+    for images in [25, 50, 100, 200, 400] {
+        let rows: Vec<Vec<f64>> = seeds
+            .par_iter()
+            .map(|&seed| {
+                let mut g = Generator::new(Preset::T2, Some(images), seed);
+                g.bend_scale = 0.0;
+                let (data, truth) = g.generate();
+                let mut out = vec![truth_error(&run(&data, Method::Standard, &plain), &truth)];
+                let mut sigmas = Vec::new();
+                for m in [Method::Static, Method::Full] {
+                    for s in [&plain, &fixed, &auto] {
+                        let c = run(&data, m, s);
+                        out.push(truth_error(&c, &truth));
+                        if s.board.static_sigma_auto {
+                            sigmas.push(c.settings.board.static_sigma_m.unwrap_or(f64::NAN));
+                        }
+                    }
+                }
+                out.extend(sigmas);
+                out
+            })
+            .collect();
+        let mean = |i: usize| rows.iter().map(|r| r[i]).sum::<f64>() / rows.len() as f64;
+        println!(
+            "| {images} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.4}, {:.4} |",
+            mean(0),
+            mean(1),
+            mean(2),
+            mean(3),
+            mean(4),
+            mean(5),
+            mean(6),
+            mean(7) * 1e3,
+            mean(8) * 1e3
+        );
+    }
 }
 
 /// Why `static` loses to `standard` on T4: the protocol under one change at a time.
@@ -545,6 +599,9 @@ fn main() {
     }
     if which == "reference" {
         reference_timing();
+    }
+    if which == "size" {
+        size();
     }
     if all || which == "order" {
         order();
