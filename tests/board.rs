@@ -624,3 +624,51 @@ fn an_auto_static_prior_sees_t3s_print_error_but_not_its_sheet_offset() {
         "full with the auto prior still beats dynamic on T3"
     );
 }
+
+#[test]
+fn the_corrections_marginal_information_is_the_inverse_of_their_covariance() {
+    // Independent computation: the dense JᵀJ inverted whole, its corrections'
+    // block taken and inverted again; against the Schur complements.
+    use deformcal::solver::covariance::unit_correction_information;
+    use deformcal::solver::problem::Loss;
+    use nalgebra::DMatrix;
+    let (data, _) = Generator::new(Preset::T4, Some(6), 5).generate();
+    for method in [Method::Static, Method::Full] {
+        let settings = SolverSettings {
+            loss: Loss::None,
+            ..SolverSettings::default()
+        };
+        let c = run(&data, method, &settings);
+        let problem = c.problem();
+        let (params, info) = unit_correction_information(&problem, &c.state, &settings).unwrap();
+        let e = problem.jacobian(&c.state, &settings).unwrap();
+        let mut j = DMatrix::<f64>::zeros(e.jacobian_rows, e.jacobian_cols);
+        for r in 0..e.jacobian_rows {
+            for k in e.jacobian_row_ptr[r] as usize..e.jacobian_row_ptr[r + 1] as usize {
+                j[(r, e.jacobian_col_idx[k] as usize)] = e.jacobian_values[k];
+            }
+        }
+        let cov = (j.transpose() * &j)
+            .try_inverse()
+            .expect("the gauge is fixed");
+        let columns: Vec<usize> = params
+            .iter()
+            .map(|p| {
+                e.jacobian_col_param
+                    .iter()
+                    .position(|&q| q as usize == *p)
+                    .expect("a free value")
+            })
+            .collect();
+        let corrections = method.correction_dims() * data.target.num_corners()
+            - if method == Method::Static { 7 } else { 4 };
+        assert_eq!(columns.len(), corrections, "{method}: every free value");
+        let reference = cov
+            .select_rows(&columns)
+            .select_columns(&columns)
+            .try_inverse()
+            .unwrap();
+        let relative = (&info - &reference).norm() / reference.norm();
+        assert!(relative < 1e-6, "{method}: relative difference {relative}");
+    }
+}

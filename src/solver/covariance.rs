@@ -4,10 +4,11 @@
 //!
 //! The gauge is fixed by the parameterisation: held corners have no Jacobian
 //! column, so JᵀJ is regular for a well-posed problem and is inverted as it is,
-//! never pseudo-inverted. For Σ_θ the per-image blocks (pose, bend) or the
-//! per-corner corrections, whichever leaves fewer parameters, are eliminated by
-//! a Schur complement, as Ceres' solver does; for the corrections' own variance
-//! the per-image blocks are. The reduced system is dense.
+//! never pseudo-inverted. For Σ_θ and the corrections' standard deviations the
+//! per-image blocks (pose, bend) or the per-corner corrections, whichever leaves
+//! fewer parameters, are eliminated by a Schur complement, as Ceres' solver
+//! does; for the corrections' marginal information the per-image blocks are.
+//! The reduced system is dense.
 //!
 //! The robust loss enters as fixed weights: with w = ρ'(‖r‖²) per observation the
 //! fit solves the weighted normal equations H = JᵀWJ, so an estimate moves by
