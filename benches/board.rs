@@ -1,6 +1,11 @@
 //! The board-model experiments of issue 15 (beyond the paper), each printed as a
 //! table. `cargo bench --bench board -- <experiment>` with `prior` (the 50 × 25
-//! protocol on T1–T4 and a rigid board, with and without `static_prior_mm`),
+//! protocol on T1–T4 and a rigid board: no prior, `static_prior_mm` of `PRIOR`
+//! mm, `"auto"`, and with `bend_prior_mm = "auto"` too; `PRIORS=0,2` picks rows),
+//! `reference` (the time of `static_prior_mm = "auto"` on the 650-image
+//! reference; not in `all`), `size` (the static prior against the number of
+//! images on a rigid board; not in `all`), `gauge` (the static prior against
+//! a gauge-invariant one, emulated; not in `all`),
 //! `t4` (why `static` loses on T4: the protocol with one change at a time; not in
 //! `all`),
 //! `order` (the `warped` preset: bend orders 2–4), `auto` (`bend_order = "auto"`
@@ -75,8 +80,24 @@ fn summarise(rows: &[deformcal::app::protocol::Row]) -> Vec<(Method, f64, f64, u
 }
 
 fn prior() {
+    let prior = std::env::var("PRIOR").unwrap_or_else(|_| "0.05".into());
+    let auto = "static_prior_mm = \"auto\"".to_string();
+    let configs = [
+        ("none", String::new()),
+        (
+            &*format!("static {prior} mm"),
+            format!("static_prior_mm = {prior}"),
+        ),
+        ("static auto", auto.clone()),
+        (
+            "static + bend auto",
+            format!("{auto}\nbend_prior_mm = \"auto\""),
+        ),
+    ]
+    .map(|(a, b)| (a.to_string(), b));
+    let only = std::env::var("PRIORS").ok();
     println!(
-        "## static prior: truth mapping error (px), {} × 25 protocol",
+        "## board priors: truth mapping error (px), {} × 25 protocol",
         subsets()
     );
     println!(
@@ -90,23 +111,224 @@ fn prior() {
         ("T4", "t4", 1.0),
         ("rigid (T2 board, no bend)", "t2", 0.0),
     ] {
-        let prior = std::env::var("PRIOR").unwrap_or_else(|_| "0.1".into());
-        for extra in [String::new(), format!("static_prior_mm = {prior}")] {
-            let r = protocol(preset, &extra, scale);
+        for (label, extra) in &configs {
+            // `PRIORS=0,2,3` runs only those rows of each target.
+            let index = configs.iter().position(|c| &c.0 == label).unwrap_or(0);
+            if only
+                .as_deref()
+                .is_some_and(|o| !o.split(',').any(|i| i == index.to_string()))
+            {
+                continue;
+            }
+            let start = std::time::Instant::now();
+            let r = protocol(preset, extra, scale);
             let cell = |i: usize| format!("{:.3} ± {:.3}", r[i].1, r[i].2);
             println!(
-                "| {name} | {} | {} | {} | {} | {} | {:.2} | {:.2} |",
-                if extra.is_empty() {
-                    "none".into()
-                } else {
-                    format!("{prior} mm")
-                },
+                "| {name} | {label} | {} | {} | {} | {} | {:.2} | {:.2} |",
                 cell(0),
                 cell(1),
                 cell(2),
                 cell(3),
                 r[1].1 / r[0].1,
                 r[3].1 / r[2].1
+            );
+            eprintln!("{name} {label}: {:.0} s", start.elapsed().as_secs_f64());
+        }
+    }
+}
+
+/// `static_prior_mm = "auto"` on the protocol's 650-image reference set
+/// (`static`): the calibration's time with and without it, and the estimate's.
+fn reference_timing() {
+    use deformcal::solver::auto_prior::AutoPrior;
+    let (reference, truth) = Generator::new(Preset::Reference, None, 1).generate();
+    let plain = SolverSettings::default();
+    let mut auto = SolverSettings::default();
+    auto.board.static_sigma_auto = true;
+    let t = std::time::Instant::now();
+    let free = run(&reference, Method::Static, &plain);
+    let t_free = t.elapsed().as_secs_f64();
+    let t = std::time::Instant::now();
+    let with = run(&reference, Method::Static, &auto);
+    let t_auto = t.elapsed().as_secs_f64();
+    let t = std::time::Instant::now();
+    let noise = with.settings.board.noise_px.expect("a noise");
+    let e = AutoPrior::Static.estimate(&free.problem(), &free.state, &free.settings, noise);
+    let t_estimate = t.elapsed().as_secs_f64();
+    let mut fixed = SolverSettings::default();
+    fixed.board.static_sigma_m = Some(0.05e-3);
+    let fixed = run(&reference, Method::Static, &fixed);
+    println!("## static_prior_mm = \"auto\" on the 650-image reference (`static`)");
+    println!(
+        "calibration {t_free:.1} s without, {t_auto:.1} s with (estimate alone {t_estimate:.2} s); σ {:.4} mm over {} values; mapping error {:.3} px without, {:.3} px with, {:.3} px with 0.05 mm",
+        e.map_or(f64::NAN, |e| e.sigma * 1e3),
+        e.map_or(0, |e| e.values),
+        truth_error(&free, &truth),
+        truth_error(&with, &truth),
+        truth_error(&fixed, &truth)
+    );
+}
+
+/// The static prior against the number of images: rigid T2 boards (the
+/// presets' print error), `static` and `full` without a prior, with 0.05 mm
+/// and with "auto"; mean truth mapping error over `SUBSETS` (≤ 5) seeds.
+fn size() {
+    let seeds: Vec<u64> = (1..=subsets().min(5) as u64).collect();
+    println!(
+        "## static prior against the number of images (rigid T2 board, seeds {seeds:?}): truth mapping error (px)"
+    );
+    println!("| images | standard | static | static 0.05 mm | static auto | full | full 0.05 mm | full auto | σ auto (static, full) mm |");
+    println!("|---|---|---|---|---|---|---|---|---|");
+    let mut fixed = SolverSettings::default();
+    fixed.board.static_sigma_m = Some(0.05e-3);
+    let mut auto = SolverSettings::default();
+    auto.board.static_sigma_auto = true;
+    let plain = SolverSettings::default();
+    for images in [25, 50, 100, 200, 400] {
+        let rows: Vec<Vec<f64>> = seeds
+            .par_iter()
+            .map(|&seed| {
+                let mut g = Generator::new(Preset::T2, Some(images), seed);
+                g.bend_scale = 0.0;
+                let (data, truth) = g.generate();
+                let mut out = vec![truth_error(&run(&data, Method::Standard, &plain), &truth)];
+                let mut sigmas = Vec::new();
+                for m in [Method::Static, Method::Full] {
+                    for s in [&plain, &fixed, &auto] {
+                        let c = run(&data, m, s);
+                        out.push(truth_error(&c, &truth));
+                        if s.board.static_sigma_auto {
+                            sigmas.push(c.settings.board.static_sigma_m.unwrap_or(f64::NAN));
+                        }
+                    }
+                }
+                out.extend(sigmas);
+                out
+            })
+            .collect();
+        let mean = |i: usize| rows.iter().map(|r| r[i]).sum::<f64>() / rows.len() as f64;
+        println!(
+            "| {images} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.4}, {:.4} |",
+            mean(0),
+            mean(1),
+            mean(2),
+            mean(3),
+            mean(4),
+            mean(5),
+            mean(6),
+            mean(7) * 1e3,
+            mean(8) * 1e3
+        );
+    }
+}
+
+/// The similarity directions (translation, rotation, scale; in-plane for a
+/// 2-value correction) as columns over every corner's `dims` correction values.
+fn similarity_basis(t: &deformcal::model::target::Target, dims: usize) -> nalgebra::DMatrix<f64> {
+    use nalgebra::Vector3;
+    let (e0, e1, e2) = (Vector3::x(), Vector3::y(), Vector3::z());
+    let n = t.num_corners();
+    let mut b = nalgebra::DMatrix::zeros(dims * n, if dims == 3 { 7 } else { 4 });
+    for i in 0..n {
+        let x = t.nominal(i);
+        let columns = if dims == 3 {
+            vec![e0, e1, e2, e0.cross(&x), e1.cross(&x), e2.cross(&x), x]
+        } else {
+            vec![e0, e1, e2.cross(&x), x]
+        };
+        for (c, v) in columns.iter().enumerate() {
+            for k in 0..dims {
+                b[(dims * i + k, c)] = v[k];
+            }
+        }
+    }
+    b
+}
+
+/// `free`'s method (solved without a prior) with a static prior of σ on the
+/// correction less its similarity part (gauge-invariant), emulated: the
+/// prior's mean is the similarity part of the last solve's correction (zero on
+/// the gauge's held values), set as `[target] geometry`, and the solve repeated
+/// three times from the free one (from a solve with the i.i.d. prior, whose
+/// similarity part that prior has shrunk, the alternation crawls).
+fn gauge_invariant(data: &Dataset, free: &Calibration, sigma: f64) -> Calibration {
+    let (t, dims) = (data.target, free.method.correction_dims());
+    let q = similarity_basis(&t, dims).qr().q();
+    let g = &free.gauge;
+    let held = |i: usize, k: usize| g[..2].contains(&i) || (dims == 3 && k == 2 && i == g[2]);
+    let mut settings = SolverSettings::default();
+    settings.board.static_sigma_m = Some(sigma);
+    let mut last = free.clone();
+    let mut mean = vec![[0.0; 3]; t.num_corners()];
+    for _ in 0..3 {
+        let total = nalgebra::DVector::from_iterator(
+            dims * t.num_corners(),
+            (0..t.num_corners())
+                .flat_map(|i| (0..dims).map(move |k| (i, k)))
+                .map(|(i, k)| last.state.corrections[i][k] + mean[i][k]),
+        );
+        let m = &q * (q.transpose() * total);
+        for (i, v) in mean.iter_mut().enumerate() {
+            for k in 0..dims {
+                v[k] = if held(i, k) { 0.0 } else { m[dims * i + k] };
+            }
+        }
+        settings.board.geometry = Some(Arc::new(BoardGeometry {
+            target: t,
+            correction: mean.clone(),
+            correction_std: vec![[sigma; 3]; t.num_corners()],
+        }));
+        last = run(data, free.method, &settings);
+    }
+    last
+}
+
+/// The static prior as it is (i.i.d. on the correction in the gauge's frame)
+/// against a gauge-invariant one (emulated, [`gauge_invariant`]), both with
+/// the "auto" σ; sums of the truth mapping error over seeds 1–3.
+fn gauge() {
+    println!("## i.i.d. against gauge-invariant static prior (σ: \"auto\"), truth mapping error summed over seeds 1–3 (px)");
+    println!("| data | images | method | standard | no prior | i.i.d. (auto) | gauge-invariant (auto σ) |");
+    println!("|---|---|---|---|---|---|---|");
+    let mut auto = SolverSettings::default();
+    auto.board.static_sigma_auto = true;
+    let plain = SolverSettings::default();
+    for (name, preset, bend, images) in [
+        ("rigid T2 board", Preset::T2, 0.0, 25),
+        ("rigid T2 board", Preset::T2, 0.0, 200),
+        ("T1", Preset::T1, 1.0, 25),
+        ("T3", Preset::T3, 1.0, 25),
+    ] {
+        for method in [Method::Static, Method::Full] {
+            let rows: Vec<[f64; 4]> = (1..=3u64)
+                .into_par_iter()
+                .map(|seed| {
+                    let mut g = Generator::new(preset, Some(images), seed);
+                    g.bend_scale = bend;
+                    let (data, truth) = g.generate();
+                    let with = run(&data, method, &auto);
+                    let free = run(&data, method, &plain);
+                    let sigma = with.settings.board.static_sigma_m;
+                    let invariant = sigma.map(|s| gauge_invariant(&data, &free, s));
+                    [
+                        truth_error(&run(&data, Method::Standard, &plain), &truth),
+                        truth_error(&free, &truth),
+                        truth_error(&with, &truth),
+                        invariant.map_or(f64::NAN, |c| truth_error(&c, &truth)),
+                    ]
+                })
+                .collect();
+            // NaN: "auto" dropped the prior on a seed, so there is no σ to emulate with.
+            let sum = |i: usize| match rows.iter().map(|r| r[i]).sum::<f64>() {
+                v if v.is_nan() => "—".to_string(),
+                v => format!("{v:.3}"),
+            };
+            println!(
+                "| {name} | {images} | {method} | {} | {} | {} | {} |",
+                sum(0),
+                sum(1),
+                sum(2),
+                sum(3)
             );
         }
     }
@@ -487,6 +709,15 @@ fn main() {
     }
     if which == "t4" {
         t4();
+    }
+    if which == "reference" {
+        reference_timing();
+    }
+    if which == "size" {
+        size();
+    }
+    if which == "gauge" {
+        gauge();
     }
     if all || which == "order" {
         order();

@@ -45,14 +45,16 @@ pub struct CalibrationConfig {
     /// rails on the RMSE (`app::guard`).
     pub max_rmse_px: Option<f64>,
     /// 1σ of the board's print / flatness error, mm: a Gaussian prior on every
-    /// static correction value (off by default: the paper's model).
-    pub static_prior_mm: Option<f64>,
+    /// static correction value (off by default: the paper's model), or "auto".
+    #[serde(deserialize_with = "static_prior_mm")]
+    pub static_prior_mm: Option<PriorSigma>,
     /// Order of the per-image polynomial bend of `dynamic` / `full` (2: the
     /// paper's paraboloid), or `auto` (chosen by cross-validation).
     pub bend_order: BendOrder,
     /// 1σ of each bend term's out-of-plane reach at the board's corner, mm: a
     /// zero-mean prior on the bend amplitudes (off by default), or "auto".
-    pub bend_prior_mm: Option<BendPrior>,
+    #[serde(deserialize_with = "bend_prior_mm")]
+    pub bend_prior_mm: Option<PriorSigma>,
     /// 1σ of each bend term's change between consecutive frames, mm at the
     /// board's corner: temporal smoothness for video (off by default).
     pub bend_smoothness: Option<f64>,
@@ -100,11 +102,10 @@ impl TryFrom<RawBendOrder> for BendOrder {
     }
 }
 
-/// `[calibration] bend_prior_mm`: a σ in millimetres, or "auto" (estimated
-/// from the bends' spread beyond their noise, `solver::bend_prior`).
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
-#[serde(try_from = "RawBendPrior")]
-pub enum BendPrior {
+/// `[calibration] static_prior_mm` and `bend_prior_mm`: a prior's σ in
+/// millimetres, or "auto" (estimated from the data, `solver::auto_prior`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PriorSigma {
     /// This σ, millimetres.
     Mm(f64),
     /// Empirical Bayes.
@@ -113,33 +114,51 @@ pub enum BendPrior {
 
 #[derive(Deserialize)]
 #[serde(untagged)]
-enum RawBendPrior {
+enum RawPriorSigma {
     Number(f64),
     Name(String),
+    Other(toml::Value),
 }
 
-impl TryFrom<RawBendPrior> for BendPrior {
-    type Error = String;
-    fn try_from(r: RawBendPrior) -> std::result::Result<Self, String> {
-        match r {
-            RawBendPrior::Number(v) => Ok(BendPrior::Mm(v)),
-            RawBendPrior::Name(s) if s == "auto" => Ok(BendPrior::Auto),
-            RawBendPrior::Name(s) => Err(format!(
-                "bend_prior_mm must be a number of millimetres or \"auto\" (got \"{}\")",
-                short(&s)
-            )),
-        }
-    }
-}
-
-impl BendPrior {
+impl PriorSigma {
     /// The fixed σ, millimetres (`None` for "auto").
     pub fn mm(self) -> Option<f64> {
         match self {
-            BendPrior::Mm(v) => Some(v),
-            BendPrior::Auto => None,
+            PriorSigma::Mm(v) => Some(v),
+            PriorSigma::Auto => None,
         }
     }
+
+    /// Reads the value of `key`; the error names the key (serde's does not).
+    fn read<'de, D: serde::Deserializer<'de>>(
+        d: D,
+        key: &str,
+    ) -> std::result::Result<Option<Self>, D::Error> {
+        match RawPriorSigma::deserialize(d)? {
+            RawPriorSigma::Number(v) => Ok(Some(PriorSigma::Mm(v))),
+            RawPriorSigma::Name(s) if s == "auto" => Ok(Some(PriorSigma::Auto)),
+            RawPriorSigma::Name(s) => Err(serde::de::Error::custom(format!(
+                "{key} must be a number of millimetres or \"auto\" (got \"{}\")",
+                short(&s)
+            ))),
+            RawPriorSigma::Other(v) => Err(serde::de::Error::custom(format!(
+                "{key} must be a number of millimetres or \"auto\" (got {})",
+                short(&v.to_string())
+            ))),
+        }
+    }
+}
+
+fn static_prior_mm<'de, D: serde::Deserializer<'de>>(
+    d: D,
+) -> std::result::Result<Option<PriorSigma>, D::Error> {
+    PriorSigma::read(d, "static_prior_mm")
+}
+
+fn bend_prior_mm<'de, D: serde::Deserializer<'de>>(
+    d: D,
+) -> std::result::Result<Option<PriorSigma>, D::Error> {
+    PriorSigma::read(d, "bend_prior_mm")
 }
 
 /// Default of `max_bend_mm`.
@@ -234,9 +253,10 @@ impl From<&CalibrationConfig> for SolverSettings {
             per_corner_blocks: false,
             outlier_k: c.outlier_k,
             board: BoardPriors {
-                static_sigma_m: c.static_prior_mm.map(|v| v * 1e-3),
-                bend_sigma_m: c.bend_prior_mm.and_then(BendPrior::mm).map(|v| v * 1e-3),
-                bend_sigma_auto: c.bend_prior_mm == Some(BendPrior::Auto),
+                static_sigma_m: c.static_prior_mm.and_then(PriorSigma::mm).map(|v| v * 1e-3),
+                static_sigma_auto: c.static_prior_mm == Some(PriorSigma::Auto),
+                bend_sigma_m: c.bend_prior_mm.and_then(PriorSigma::mm).map(|v| v * 1e-3),
+                bend_sigma_auto: c.bend_prior_mm == Some(PriorSigma::Auto),
                 smoothness_sigma_m: c.bend_smoothness.map(|v| v * 1e-3),
                 geometry: c.geometry.clone(),
                 noise_px: c.detector_noise_px,
@@ -711,8 +731,11 @@ impl Checker<'_> {
     /// The board priors' σ: positive millimetres.
     fn check_board_priors(&self, c: &CalibrationConfig) -> Result<()> {
         for (key, v) in [
-            ("static_prior_mm", c.static_prior_mm),
-            ("bend_prior_mm", c.bend_prior_mm.and_then(BendPrior::mm)),
+            (
+                "static_prior_mm",
+                c.static_prior_mm.and_then(PriorSigma::mm),
+            ),
+            ("bend_prior_mm", c.bend_prior_mm.and_then(PriorSigma::mm)),
             ("bend_smoothness", c.bend_smoothness),
             ("max_bend_mm", Some(c.max_bend_mm)),
         ] {

@@ -302,5 +302,13 @@ fn write_board(s: &mut String, c: &Calibration) {
             max * 1e3,
             c.gauge
         );
+        let board = &c.settings.board;
+        if let (true, Some(sigma)) = (board.static_sigma_auto, board.static_sigma_m) {
+            let _ = writeln!(
+                s,
+                "  static prior σ {:.4} mm per correction value, from the corrections' spread beyond their noise (static_prior_mm = \"auto\")",
+                sigma * 1e3
+            );
+        }
     }
 }

@@ -259,6 +259,9 @@ pub struct BoardGeometry {
 pub struct BoardPriors {
     /// 1σ of every static correction value, metres (`static_prior_mm`).
     pub static_sigma_m: Option<f64>,
+    /// `static_prior_mm = "auto"`: the static prior's σ is estimated from the
+    /// data (empirical Bayes) after a solve without it.
+    pub static_sigma_auto: bool,
     /// 1σ of each bend term's Δz at the board's corner, metres (`bend_prior_mm`).
     pub bend_sigma_m: Option<f64>,
     /// `bend_prior_mm = "auto"`: the bend prior's σ is estimated from the data
@@ -284,6 +287,7 @@ impl BoardPriors {
     /// Whether any prior is on (and so the noise that weights them is needed).
     pub fn any(&self) -> bool {
         self.static_sigma_m.is_some()
+            || self.static_sigma_auto
             || self.bend_sigma_m.is_some()
             || self.bend_sigma_auto
             || self.smoothness_sigma_m.is_some()

@@ -8,6 +8,7 @@ use crate::model::pose::Pose;
 use crate::model::selection::Selection;
 use crate::model::uncertainty::{IntrinsicsCovariance, UncertaintyError};
 use crate::model::{fisheye_init, zhang};
+use crate::solver::auto_prior::{AutoPrior, Estimate};
 use crate::solver::problem::{
     choose_gauge, rmse, underobserved_corners, Hold, Problem, SolveReport, SolverSettings, State,
 };
@@ -504,43 +505,66 @@ fn method_problem<'a>(
     }
 }
 
-/// With `bend_prior_mm = "auto"`, the bend prior's σ from the solve without it.
-fn auto_bend_sigma(
-    dataset: &Dataset,
-    state: &State,
-    request: &Request,
-    (gauge, frozen, _): &(Vec<usize>, Vec<usize>, Vec<f64>),
-) -> Option<f64> {
-    let board = &request.settings.board;
-    if !board.bend_sigma_auto || board.bend_sigma_m.is_some() || !request.method.has_paraboloid() {
-        return None;
-    }
-    let problem = method_problem(dataset, request.method, gauge, frozen);
-    crate::solver::bend_prior::estimate_bend_sigma(
-        &problem,
-        state,
-        &request.settings,
-        board.noise_px?,
-    )
-}
+/// What a method's solve hands back: its gauge, frozen corners and residuals.
+type Solved = (Vec<usize>, Vec<usize>, Vec<f64>);
 
-/// Solves again with the bend prior of σ `sigma` (metres) and keeps that unless
-/// it fits the observations clearly worse than the solve without it (`free`): a
-/// prior the bends agree with costs at most about one σ̂² of squared residual
-/// per bend value it holds. A safety net: a prior the data contradict (as one
-/// weighted by a wild noise estimate did, holding 7 mm bends flat) is dropped
-/// and the free solve stands.
-fn with_auto_bend_prior(
+/// With `static_prior_mm` or `bend_prior_mm = "auto"`: each such prior's σ
+/// from the solve without them (`free`, at `state`), then the method solved
+/// again with each in turn (static first), each kept as
+/// [`with_auto_prior`] decides.
+fn with_auto_priors(
     dataset: &Dataset,
     state: &mut State,
     request: &mut Request,
-    sigma: f64,
-    free: (Vec<usize>, Vec<usize>, Vec<f64>),
+    free: Solved,
     stages: &mut Vec<Stage>,
     warnings: &mut Vec<String>,
-) -> Result<(Vec<usize>, Vec<usize>, Vec<f64>)> {
+) -> Result<Solved> {
+    let board = &request.settings.board;
+    let wanted: Vec<AutoPrior> = AutoPrior::ALL
+        .into_iter()
+        .filter(|p| p.wanted(board, request.method))
+        .collect();
+    let Some(noise) = board.noise_px.filter(|_| !wanted.is_empty()) else {
+        return Ok(free);
+    };
+    let problem = method_problem(dataset, request.method, &free.0, &free.1);
+    let mut estimates = Vec::new();
+    for prior in wanted {
+        match prior.estimate(&problem, state, &request.settings, noise) {
+            Some(e) => estimates.push((prior, e)),
+            None => warnings.push(format!(
+                "{} = \"auto\": the solve gives no estimate of the prior's σ; the prior is left off",
+                prior.key()
+            )),
+        }
+    }
+    let mut solved = free;
+    for estimate in estimates {
+        solved = with_auto_prior(dataset, state, request, estimate, solved, stages, warnings)?;
+    }
+    Ok(solved)
+}
+
+/// Solves again with the estimated prior and keeps that unless it fits the
+/// observations clearly worse than the solve without it (`before`). A prior
+/// the values agree with costs each value it holds 1/(1 + hσ²) σ̂² of squared
+/// residual on average (h its information): at most n over n values, with a
+/// spread of at most √(2n) (a χ² of n degrees when σ → 0, a rigid board's
+/// case, which a bound of n alone rejected every other time). A safety net: a
+/// prior the data contradict (as one weighted by a wild noise estimate did,
+/// holding 7 mm bends flat) is dropped and the solve without it stands.
+fn with_auto_prior(
+    dataset: &Dataset,
+    state: &mut State,
+    request: &mut Request,
+    (prior, estimate): (AutoPrior, Estimate),
+    before: Solved,
+    stages: &mut Vec<Stage>,
+    warnings: &mut Vec<String>,
+) -> Result<Solved> {
     let saved = state.clone();
-    request.settings.board.bend_sigma_m = Some(sigma);
+    prior.set(&mut request.settings.board, Some(estimate.sigma));
     let held = solve_method(dataset, state, request, stages, warnings)?;
     let sum_sq = |r: &[f64]| -> f64 {
         crate::model::trust::weighted(dataset, r)
@@ -549,18 +573,21 @@ fn with_auto_bend_prior(
             .sum()
     };
     let noise = request.settings.board.noise_px.unwrap_or(f64::NAN);
-    let bend_values = (request.method.info().frame_params * dataset.num_frames()) as f64;
-    let cost = (sum_sq(&held.2) - sum_sq(&free.2)) / (noise * noise);
-    if cost <= bend_values {
+    let cost = (sum_sq(&held.2) - sum_sq(&before.2)) / (noise * noise);
+    let n = estimate.values as f64;
+    let bound = n + 4.0 * (2.0 * n).sqrt();
+    if cost <= bound {
         return Ok(held);
     }
     *state = saved;
-    request.settings.board.bend_sigma_m = None;
+    prior.set(&mut request.settings.board, None);
     warnings.push(format!(
-        "bend_prior_mm = \"auto\": a bend prior of {:.3} mm fits the observations worse by {cost:.0} σ̂² (more than its {bend_values:.0} bend values explain); the bends are left free",
-        sigma * 1e3
+        "{} = \"auto\": a prior of {:.4} mm fits the observations worse by {cost:.0} σ̂² (more than the {bound:.0} its {} held values explain); the prior is left off",
+        prior.key(),
+        estimate.sigma * 1e3,
+        estimate.values
     ));
-    Ok(free)
+    Ok(before)
 }
 
 /// The settings of the `standard` stage.
@@ -590,7 +617,7 @@ fn solve_method(
     request: &Request,
     stages: &mut Vec<Stage>,
     warnings: &mut Vec<String>,
-) -> Result<(Vec<usize>, Vec<usize>, Vec<f64>)> {
+) -> Result<Solved> {
     let gauge = choose_gauge(dataset, request.method, request.gauge.as_deref())?;
     let frozen = if request.method.has_correction() {
         underobserved_corners(dataset)
@@ -666,18 +693,14 @@ pub fn fit(dataset: &Dataset, request: &Request) -> Result<Calibration> {
         (Vec::new(), Vec::new(), residuals)
     } else {
         let solved = solve_method(&dataset, &mut state, &request, &mut stages, &mut warnings)?;
-        match auto_bend_sigma(&dataset, &state, &request, &solved) {
-            Some(sigma) => with_auto_bend_prior(
-                &dataset,
-                &mut state,
-                &mut request,
-                sigma,
-                solved,
-                &mut stages,
-                &mut warnings,
-            )?,
-            None => solved,
-        }
+        with_auto_priors(
+            &dataset,
+            &mut state,
+            &mut request,
+            solved,
+            &mut stages,
+            &mut warnings,
+        )?
     };
     let request = &request;
     let (dataset, residuals, frozen, rejected) = finish_robustly(

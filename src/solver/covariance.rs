@@ -4,9 +4,11 @@
 //!
 //! The gauge is fixed by the parameterisation: held corners have no Jacobian
 //! column, so JᵀJ is regular for a well-posed problem and is inverted as it is,
-//! never pseudo-inverted. The per-image blocks (pose, bend) or the per-corner
-//! corrections, whichever leaves fewer parameters, are eliminated by a Schur
-//! complement, as Ceres' solver does; the reduced system is dense.
+//! never pseudo-inverted. For Σ_θ and the corrections' standard deviations the
+//! per-image blocks (pose, bend) or the per-corner corrections, whichever leaves
+//! fewer parameters, are eliminated by a Schur complement, as Ceres' solver
+//! does; for the corrections' marginal information the per-image blocks are.
+//! The reduced system is dense.
 //!
 //! The robust loss enters as fixed weights: with w = ρ'(‖r‖²) per observation the
 //! fit solves the weighted normal equations H = JᵀWJ, so an estimate moves by
@@ -65,18 +67,33 @@ fn group_of(layout: &Layout, index: usize, frames: bool) -> Option<usize> {
     }
 }
 
-/// The roles of the columns and the eliminated blocks (first index, size):
-/// eliminate whichever of the per-image and per-corner blocks leaves the smaller
-/// reduced system.
-fn roles(layout: &Layout, params: &[usize]) -> (Vec<Role>, usize, Vec<(usize, usize)>) {
+/// Which blocks a normal matrix eliminates before its dense solve.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Eliminate {
+    /// The per-image blocks or the per-corner corrections, whichever leaves the
+    /// smaller reduced system (the intrinsics are all that is asked for).
+    Smaller,
+    /// The per-image blocks (pose, bend), so that the corrections stay in the
+    /// reduced system with the intrinsics they trade off against.
+    Frames,
+}
+
+/// The roles of the columns and the eliminated blocks (first index, size).
+fn roles(
+    layout: &Layout,
+    params: &[usize],
+    eliminate: Eliminate,
+) -> (Vec<Role>, usize, Vec<(usize, usize)>) {
     let count = |frames| {
         params
             .iter()
             .filter(|&&p| group_of(layout, p, frames).is_some())
             .count()
     };
-    let (in_frames, in_corners) = (count(true), count(false));
-    let frames = in_corners == 0 || in_frames >= in_corners;
+    let frames = eliminate == Eliminate::Frames || {
+        let (in_frames, in_corners) = (count(true), count(false));
+        in_corners == 0 || in_frames >= in_corners
+    };
     let mut ids: HashMap<usize, usize> = HashMap::new();
     let mut sizes: Vec<usize> = Vec::new();
     let mut local = Vec::with_capacity(params.len());
@@ -126,9 +143,10 @@ fn normal_matrix(
     e: &Evaluation,
     layout: &Layout,
     weights: &[f64],
+    eliminate: Eliminate,
 ) -> Result<Normal, UncertaintyError> {
     let params: Vec<usize> = e.jacobian_col_param.iter().map(|&p| p as usize).collect();
-    let (roles, kept, groups) = roles(layout, &params);
+    let (roles, kept, groups) = roles(layout, &params, eliminate);
     let eliminated: usize = groups.iter().map(|g| g.1).sum();
     if kept > MAX_REDUCED || kept.saturating_mul(eliminated) > MAX_COUPLING {
         return Err(UncertaintyError::TooLarge(kept));
@@ -339,10 +357,21 @@ fn jacobi_scale(
         .collect())
 }
 
-/// Eliminates every block: factors D = LLᵀ in place, turns Bᵀ into L⁻¹Bᵀ and
-/// subtracts its Gram matrix from the kept block, leaving the Schur complement
-/// A − B D⁻¹ Bᵀ there (one matrix product); then factors that too.
+/// Eliminates every block and factors what is left: [`schur`], then the
+/// Schur complement's Cholesky factor in place.
 fn eliminate(d: &Dataset, layout: &Layout, n: &mut Normal) -> Result<(), UncertaintyError> {
+    schur(d, layout, n)?;
+    let kk = n.a.nrows();
+    // Symmetric, so the column-major storage reads as row-major.
+    cholesky(n.a.as_mut_slice(), kk).map_err(|k| {
+        UncertaintyError::RankDeficient(describe(d, layout, n.params[n.kept_columns[k]]))
+    })
+}
+
+/// Factors every eliminated block D = LLᵀ in place, turns Bᵀ into L⁻¹Bᵀ and
+/// subtracts its Gram matrix from the kept block, leaving the Schur complement
+/// A − B D⁻¹ Bᵀ there (one matrix product).
+fn schur(d: &Dataset, layout: &Layout, n: &mut Normal) -> Result<(), UncertaintyError> {
     let ne = n.bt.nrows();
     for (g, &(start, m)) in n.groups.iter().enumerate() {
         cholesky(&mut n.d[g], m).map_err(|l| {
@@ -358,11 +387,7 @@ fn eliminate(d: &Dataset, layout: &Layout, n: &mut Normal) -> Result<(), Uncerta
         }
     }
     n.a.gemm(-1.0, &n.bt.transpose(), &n.bt, 1.0);
-    let kk = n.a.nrows();
-    // Symmetric, so the column-major storage reads as row-major.
-    cholesky(n.a.as_mut_slice(), kk).map_err(|k| {
-        UncertaintyError::RankDeficient(describe(d, layout, n.params[n.kept_columns[k]]))
-    })
+    Ok(())
 }
 
 /// X = H⁻¹ E for the unit vectors E of the `targets` columns (all kept): one
@@ -450,7 +475,7 @@ pub fn unit_covariance(
         )));
     }
     let weights = loss_weights(d, settings, &e.residuals);
-    let mut n = normal_matrix(&e, &layout, &weights)?;
+    let mut n = normal_matrix(&e, &layout, &weights, Eliminate::Smaller)?;
     add_lens_prior(&mut n, &problem.lens_prior_weights(settings));
     let scale = jacobi_scale(d, &layout, &mut n)?;
     eliminate(d, &layout, &mut n)?;
@@ -532,7 +557,7 @@ pub fn unit_correction_std(
         .jacobian(state, settings)
         .map_err(|e| UncertaintyError::Jacobian(e.to_string()))?;
     let weights = loss_weights(d, settings, &e.residuals);
-    let mut n = normal_matrix(&e, &layout, &weights)?;
+    let mut n = normal_matrix(&e, &layout, &weights, Eliminate::Smaller)?;
     add_lens_prior(&mut n, &problem.lens_prior_weights(settings));
     let targets: Vec<usize> = (0..n.params.len())
         .filter(|&col| n.params[col] >= layout.corrections)
@@ -572,4 +597,57 @@ pub fn unit_correction_std(
         out[i / CORRECTION_STRIDE][i % CORRECTION_STRIDE] = var[u].sqrt();
     }
     Ok(out)
+}
+
+/// The static corrections' marginal information at unit noise, with each
+/// row's index in the parameter buffer: the inverse of their covariance block
+/// with everything else free (the intrinsics above all, which they trade off
+/// against), i.e. the Schur complement of JᵀWJ onto them. The per-image blocks
+/// (pose, bend) are eliminated first, so the dense system is the corrections
+/// and the intrinsics (about 500 values for a 13 × 13 board) whatever the
+/// number of images; then the intrinsics (and camera poses) are.
+pub fn unit_correction_information(
+    problem: &Problem,
+    state: &State,
+    settings: &SolverSettings,
+) -> Result<(Vec<usize>, DMatrix<f64>), UncertaintyError> {
+    let d = problem.dataset;
+    let layout = problem.layout();
+    let e = problem
+        .jacobian(state, settings)
+        .map_err(|e| UncertaintyError::Jacobian(e.to_string()))?;
+    let weights = loss_weights(d, settings, &e.residuals);
+    let mut n = normal_matrix(&e, &layout, &weights, Eliminate::Frames)?;
+    add_lens_prior(&mut n, &problem.lens_prior_weights(settings));
+    let scale = jacobi_scale(d, &layout, &mut n)?;
+    schur(d, &layout, &mut n)?;
+    let (c, o): (Vec<usize>, Vec<usize>) =
+        (0..n.a.nrows()).partition(|&k| n.params[n.kept_columns[k]] >= layout.corrections);
+    if c.is_empty() {
+        return Err(UncertaintyError::Jacobian(
+            "the problem has no free static correction".into(),
+        ));
+    }
+    let mut info = n.a.select_rows(&c).select_columns(&c);
+    if !o.is_empty() {
+        // S_cc − S_co S_oo⁻¹ S_oc = S_cc − YᵀY with Y = L⁻¹ S_oc, S_oo = LLᵀ.
+        let mut l = n.a.select_rows(&o).select_columns(&o);
+        cholesky(l.as_mut_slice(), o.len()).map_err(|k| {
+            UncertaintyError::RankDeficient(describe(d, &layout, n.params[n.kept_columns[o[k]]]))
+        })?;
+        let mut y = n.a.select_rows(&o).select_columns(&c);
+        for column in y.as_mut_slice().chunks_exact_mut(o.len()) {
+            forward(l.as_slice(), o.len(), column);
+        }
+        info.gemm(-1.0, &y.transpose(), &y, 1.0);
+    }
+    // Undo the Jacobi scaling: H was scaled to D H D, its Schur complements alike.
+    let s: Vec<f64> = c.iter().map(|&k| scale[n.kept_columns[k]]).collect();
+    for (j, mut column) in info.column_iter_mut().enumerate() {
+        for (i, v) in column.iter_mut().enumerate() {
+            *v /= s[i] * s[j];
+        }
+    }
+    let params = c.iter().map(|&k| n.params[n.kept_columns[k]]).collect();
+    Ok((params, info))
 }

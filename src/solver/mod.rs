@@ -1,7 +1,7 @@
 //! The solver layer: the Ceres problem in `cpp/` behind one cxx bridge, the gauge
 //! and what is held fixed, and the calibration pipeline. Depends on the model
 //! layer only; knows nothing of files or configs.
-pub mod bend_prior;
+pub mod auto_prior;
 mod bridge;
 pub mod calibrate;
 pub mod covariance;
