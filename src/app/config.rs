@@ -70,7 +70,7 @@ pub struct CalibrationConfig {
 
 /// `[calibration] bend_order`: 2, 3, 4 or "auto".
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
-#[serde(try_from = "RawBendOrder")]
+#[serde(try_from = "NumberOrName<i64>")]
 pub enum BendOrder {
     /// A polynomial bend of this order.
     Fixed(usize),
@@ -78,23 +78,24 @@ pub enum BendOrder {
     Auto,
 }
 
+/// A config value that is a number or a name (`bend_order`, `lens_prior`).
 #[derive(Deserialize)]
 #[serde(untagged)]
-enum RawBendOrder {
-    Number(i64),
+enum NumberOrName<N> {
+    Number(N),
     Name(String),
 }
 
-impl TryFrom<RawBendOrder> for BendOrder {
+impl TryFrom<NumberOrName<i64>> for BendOrder {
     type Error = String;
-    fn try_from(r: RawBendOrder) -> std::result::Result<Self, String> {
+    fn try_from(r: NumberOrName<i64>) -> std::result::Result<Self, String> {
         match r {
-            RawBendOrder::Number(n @ 2..=4) => Ok(BendOrder::Fixed(n as usize)),
-            RawBendOrder::Name(s) if s == "auto" => Ok(BendOrder::Auto),
-            RawBendOrder::Number(n) => {
+            NumberOrName::Number(n @ 2..=4) => Ok(BendOrder::Fixed(n as usize)),
+            NumberOrName::Name(s) if s == "auto" => Ok(BendOrder::Auto),
+            NumberOrName::Number(n) => {
                 Err(format!("bend_order must be 2, 3, 4 or \"auto\" (got {n})"))
             }
-            RawBendOrder::Name(s) => Err(format!(
+            NumberOrName::Name(s) => Err(format!(
                 "bend_order must be 2, 3, 4 or \"auto\" (got \"{}\")",
                 short(&s)
             )),
@@ -166,26 +167,19 @@ pub const DEFAULT_MAX_BEND_MM: f64 = 5.0;
 
 /// `[calibration] lens_prior`: a σ, or "none".
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
-#[serde(try_from = "RawLensPrior")]
+#[serde(try_from = "NumberOrName<f64>")]
 pub struct LensPrior(pub Option<f64>);
 
-#[derive(Deserialize)]
-#[serde(untagged)]
-enum RawLensPrior {
-    Number(f64),
-    Name(String),
-}
-
-impl TryFrom<RawLensPrior> for LensPrior {
+impl TryFrom<NumberOrName<f64>> for LensPrior {
     type Error = String;
-    fn try_from(r: RawLensPrior) -> std::result::Result<Self, String> {
+    fn try_from(r: NumberOrName<f64>) -> std::result::Result<Self, String> {
         match r {
-            RawLensPrior::Number(v) if v.is_finite() && v > 0.0 => Ok(LensPrior(Some(v))),
-            RawLensPrior::Name(s) if s == "none" => Ok(LensPrior(None)),
-            RawLensPrior::Number(v) => Err(format!(
+            NumberOrName::Number(v) if v.is_finite() && v > 0.0 => Ok(LensPrior(Some(v))),
+            NumberOrName::Name(s) if s == "none" => Ok(LensPrior(None)),
+            NumberOrName::Number(v) => Err(format!(
                 "lens_prior must be a positive number or \"none\" (got {v})"
             )),
-            RawLensPrior::Name(s) => Err(format!(
+            NumberOrName::Name(s) => Err(format!(
                 "lens_prior must be a positive number or \"none\" (got \"{}\")",
                 short(&s)
             )),

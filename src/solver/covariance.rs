@@ -450,19 +450,18 @@ fn loss_weights(d: &Dataset, settings: &SolverSettings, residuals: &[f64]) -> Ve
         .collect()
 }
 
-/// Σ_θ of every camera at unit noise, from the Jacobian of `problem` at `state`
-/// (its optimum) with the loss of `settings`.
-pub fn unit_covariance(
+/// The Jacobian at `state`, the loss's weights and H = JᵀWJ with the lens
+/// prior's information: what every covariance here starts from.
+fn weighted_normal(
     problem: &Problem,
     state: &State,
     settings: &SolverSettings,
-) -> Result<Vec<IntrinsicsCovariance>, UncertaintyError> {
-    let d = problem.dataset;
-    let layout = problem.layout();
+    eliminate: Eliminate,
+) -> Result<(Evaluation, Vec<f64>, Normal), UncertaintyError> {
     let e = problem
         .jacobian(state, settings)
         .map_err(|e| UncertaintyError::Jacobian(e.to_string()))?;
-    let rows = 2 * d.observations.len();
+    let rows = 2 * problem.dataset.observations.len();
     if e.jacobian_rows != rows
         || e.jacobian_row_ptr.len() != rows + 1
         || e.jacobian_col_param.len() != e.jacobian_cols
@@ -474,9 +473,22 @@ pub fn unit_covariance(
             e.jacobian_col_param.len()
         )));
     }
-    let weights = loss_weights(d, settings, &e.residuals);
-    let mut n = normal_matrix(&e, &layout, &weights, Eliminate::Smaller)?;
+    let weights = loss_weights(problem.dataset, settings, &e.residuals);
+    let mut n = normal_matrix(&e, &problem.layout(), &weights, eliminate)?;
     add_lens_prior(&mut n, &problem.lens_prior_weights(settings));
+    Ok((e, weights, n))
+}
+
+/// Σ_θ of every camera at unit noise, from the Jacobian of `problem` at `state`
+/// (its optimum) with the loss of `settings`.
+pub fn unit_covariance(
+    problem: &Problem,
+    state: &State,
+    settings: &SolverSettings,
+) -> Result<Vec<IntrinsicsCovariance>, UncertaintyError> {
+    let d = problem.dataset;
+    let layout = problem.layout();
+    let (e, weights, mut n) = weighted_normal(problem, state, settings, Eliminate::Smaller)?;
     let scale = jacobi_scale(d, &layout, &mut n)?;
     eliminate(d, &layout, &mut n)?;
     let targets: Vec<usize> = (0..n.params.len())
@@ -553,12 +565,7 @@ pub fn unit_correction_std(
 ) -> Result<Vec<[f64; 3]>, UncertaintyError> {
     let d = problem.dataset;
     let layout = problem.layout();
-    let e = problem
-        .jacobian(state, settings)
-        .map_err(|e| UncertaintyError::Jacobian(e.to_string()))?;
-    let weights = loss_weights(d, settings, &e.residuals);
-    let mut n = normal_matrix(&e, &layout, &weights, Eliminate::Smaller)?;
-    add_lens_prior(&mut n, &problem.lens_prior_weights(settings));
+    let (e, weights, mut n) = weighted_normal(problem, state, settings, Eliminate::Smaller)?;
     let targets: Vec<usize> = (0..n.params.len())
         .filter(|&col| n.params[col] >= layout.corrections)
         .collect();
@@ -613,12 +620,7 @@ pub fn unit_correction_information(
 ) -> Result<(Vec<usize>, DMatrix<f64>), UncertaintyError> {
     let d = problem.dataset;
     let layout = problem.layout();
-    let e = problem
-        .jacobian(state, settings)
-        .map_err(|e| UncertaintyError::Jacobian(e.to_string()))?;
-    let weights = loss_weights(d, settings, &e.residuals);
-    let mut n = normal_matrix(&e, &layout, &weights, Eliminate::Frames)?;
-    add_lens_prior(&mut n, &problem.lens_prior_weights(settings));
+    let (_, _, mut n) = weighted_normal(problem, state, settings, Eliminate::Frames)?;
     let scale = jacobi_scale(d, &layout, &mut n)?;
     schur(d, &layout, &mut n)?;
     let (c, o): (Vec<usize>, Vec<usize>) =
