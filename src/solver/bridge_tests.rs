@@ -456,3 +456,29 @@ fn the_correction_prior_is_blind_to_a_similarity_of_the_whole_correction() {
     }
     assert!(bridge::correction_prior_minimum("standard", &flat, &delta, &weight).is_err());
 }
+
+#[test]
+fn the_correction_priors_similarity_stays_out_of_the_jacobian() {
+    // The similarity block lives outside the parameter buffer: the Jacobian that
+    // Rust reads (covariance, board.json) has the same columns with the prior.
+    for model in ["static", "full"] {
+        let plain = tiny(model);
+        let mut with = tiny(model);
+        with.correction_prior_weight = vec![100.0; 12];
+        for direct in [false, true] {
+            let columns = |d: &ProblemData| -> Vec<u32> {
+                if direct {
+                    bridge::jacobian(d, &options())
+                        .unwrap()
+                        .column_parameters()
+                        .to_vec()
+                } else {
+                    bridge::evaluate(d, &options(), true)
+                        .unwrap()
+                        .jacobian_col_param
+                }
+            };
+            assert_eq!(columns(&with), columns(&plain), "{model}, direct {direct}");
+        }
+    }
+}
