@@ -59,6 +59,11 @@ rust::Vec<size_t> board_model_sizes(rust::Str model);
 rust::Vec<double> board_point(rust::Str model, rust::Slice<const double> nominal,
                               rust::Slice<const double> frame_extra,
                               rust::Slice<const double> correction);
+// The correction prior's sum of squares over corners with `corrections` (3 each,
+// the model using a prefix) and zero mean, minimised over its similarity.
+double correction_prior_minimum(rust::Str model, rust::Slice<const double> board,
+                                rust::Slice<const double> corrections,
+                                rust::Slice<const double> weight);
 
 }  // namespace ffi
 }  // namespace deformcal

@@ -220,6 +220,9 @@ struct Assembled {
   std::vector<double*> correction_blocks;  // free corrections, none partly held
   // The priors' residuals (priors.h): solved with, never reported as observations.
   std::vector<ceres::ResidualBlockId> prior_residuals;
+  // The correction prior's similarity (priors.h): a free block outside the
+  // parameter buffer, solved with the rest and never reported.
+  std::unique_ptr<double[]> similarity;
   bool frames_linked = false;  // a prior ties frame blocks together (no Schur on frames)
   // Whether the robust loss applies: shared with every loss and view block, so
   // that one problem serves the loss-free warm-up, the robust solve and the
@@ -507,6 +510,38 @@ void AddLensPriors(const ffi::ProblemData& d, Params& p, Assembled& a) {
   }
 }
 
+// The static-correction prior of priors.h on every corner whose correction is
+// free or carries the gauge: the gauge's held values (zero) are part of the
+// correction field whose best-fitting similarity the prior leaves free, so with a
+// tight prior that similarity is pinned by them and the correction held at zero.
+template <int N>
+void AddCorrectionPrior(const ffi::ProblemData& d, Params& p, Assembled& a) {
+  ceres::Problem& problem = *a.problem;
+  if (d.correction_prior_weight.empty()) return;
+  const auto free = [&](uint32_t c) {
+    return problem.HasParameterBlock(p.Correction(c)) &&
+           !problem.IsParameterBlockConstant(p.Correction(c));
+  };
+  bool any_free = false;
+  for (uint32_t c = 0; c < d.num_corners && !any_free; ++c) any_free = free(c);
+  if (!any_free) return;
+  a.similarity = std::make_unique<double[]>(SimilaritySize(N));
+  // Starts at zero; the prior is linear in it, so any start will do.
+  std::fill(a.similarity.get(), a.similarity.get() + SimilaritySize(N), 0.0);
+  const double zeros[kCorrectionStride] = {0.0, 0.0, 0.0};
+  for (uint32_t c = 0; c < d.num_corners; ++c) {
+    const bool gauge = std::find(d.gauge_corners.begin(), d.gauge_corners.end(), c) !=
+                       d.gauge_corners.end();
+    if (!free(c) && !(gauge && problem.HasParameterBlock(p.Correction(c)))) continue;
+    const double* mean =
+        d.correction_prior_mean.empty() ? zeros : &d.correction_prior_mean[kCorrectionStride * c];
+    a.prior_residuals.push_back(problem.AddResidualBlock(
+        new CorrectionPrior<N>(mean, &d.correction_prior_weight[kCorrectionStride * c],
+                               &d.board[3 * c]),
+        nullptr, p.Correction(c), a.similarity.get()));
+  }
+}
+
 // The priors of priors.h on the free board-model parameters (off when the
 // problem data gives no weights): after the reprojection residuals, which decide
 // which blocks exist and which are held.
@@ -515,18 +550,7 @@ void AddPriors(const ffi::ProblemData& d, Params& p, Assembled& a) {
   ceres::Problem& problem = *a.problem;
   constexpr int N = Board::kCornerSize, E = Board::kFrameExtra;
   AddLensPriors(d, p, a);
-  if constexpr (N > 0) {
-    const double zeros[kCorrectionStride] = {0.0, 0.0, 0.0};
-    for (uint32_t c = 0; c < d.num_corners && !d.correction_prior_weight.empty(); ++c) {
-      double* block = p.Correction(c);
-      if (!problem.HasParameterBlock(block) || problem.IsParameterBlockConstant(block)) continue;
-      const double* mean =
-          d.correction_prior_mean.empty() ? zeros : &d.correction_prior_mean[kCorrectionStride * c];
-      a.prior_residuals.push_back(problem.AddResidualBlock(
-          new CorrectionPrior<N>(mean, &d.correction_prior_weight[kCorrectionStride * c]), nullptr,
-          block));
-    }
-  }
+  if constexpr (N > 0) AddCorrectionPrior<N>(d, p, a);
   if constexpr (E > 0) {
     if (d.hold_deformations) return;
     if (!d.bend_prior_weight.empty()) {
@@ -612,6 +636,8 @@ void ChooseLinearSolver(const Assembled& a, ceres::Solver::Options& s) {
     s.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
     return;
   }
+  // Everything not eliminated, the correction prior's similarity among it (it
+  // ties every correction, so it can never be eliminated with them), is kept.
   auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
   for (double* b : all) ordering->AddElementToGroup(b, 1);
   for (double* b : eliminated) ordering->AddElementToGroup(b, 0);
@@ -726,6 +752,18 @@ void SortRows(const std::vector<uint32_t>& order, ceres::CRSMatrix& m) {
   m = std::move(sorted);
 }
 
+// The free parameter blocks of the parameter buffer: the columns of a Jacobian
+// Rust reads, without the correction prior's internal similarity (the reprojection
+// residuals do not depend on it).
+std::vector<double*> FreeLayoutBlocks(const Assembled& a) {
+  std::vector<double*> all, out;
+  a.problem->GetParameterBlocks(&all);
+  for (double* b : all) {
+    if (!a.problem->IsParameterBlockConstant(b) && b != a.similarity.get()) out.push_back(b);
+  }
+  return out;
+}
+
 // Residuals (loss not applied) in observation order; Ceres orders them by block.
 // With `jacobian`, also the Jacobian over the free parameter blocks, whose columns'
 // buffer indices go to `columns`.
@@ -737,11 +775,7 @@ bool OrderedResiduals(Assembled& a, size_t num_observations, int threads, double
   e.apply_loss_function = false;
   e.num_threads = threads;
   if (jacobian != nullptr) {
-    std::vector<double*> all;
-    a.problem->GetParameterBlocks(&all);
-    for (double* b : all) {
-      if (!a.problem->IsParameterBlockConstant(b)) e.parameter_blocks.push_back(b);
-    }
+    e.parameter_blocks = FreeLayoutBlocks(a);
     if (columns != nullptr) *columns = ColumnParameters(*a.problem, e.parameter_blocks, base);
   }
   std::vector<double> by_block;
@@ -773,12 +807,10 @@ struct FreeColumns {
   std::vector<uint32_t> params;  // per column: the buffer index it differentiates
 };
 
-FreeColumns FreeColumnsOf(const ceres::Problem& problem, const double* base) {
-  std::vector<double*> all;
-  problem.GetParameterBlocks(&all);
+FreeColumns FreeColumnsOf(const Assembled& a, const double* base) {
+  const ceres::Problem& problem = *a.problem;
   FreeColumns f;
-  for (double* b : all) {
-    if (problem.IsParameterBlockConstant(b)) continue;
+  for (double* b : FreeLayoutBlocks(a)) {
     const std::vector<uint32_t> cols = ColumnParameters(problem, {b}, base);
     std::vector<int> coords;
     for (uint32_t c : cols) coords.push_back(static_cast<int>(c - static_cast<uint32_t>(b - base)));
@@ -796,7 +828,7 @@ void DirectJacobian(const Assembled& a, const double* base, size_t num_observati
                     ffi::Jacobian& out) {
   const ceres::Problem& problem = *a.problem;
   *a.apply_loss = false;  // the Jacobian of the plain residuals
-  const FreeColumns f = FreeColumnsOf(problem, base);
+  const FreeColumns f = FreeColumnsOf(a, base);
   // Rows come block by block; observation i's two rows go to rows 2i, 2i+1.
   std::vector<uint32_t> cols;
   std::vector<double> vals;
@@ -1006,6 +1038,44 @@ rust::Vec<double> board_point(rust::Str model, rust::Slice<const double> nominal
     double x[3];
     Board::Point(nominal.data(), frame_extra.data(), correction.data(), x);
     for (double v : x) out.push_back(v);
+  });
+  if (!known) Fail("unknown board model `" + std::string(model) + "`");
+  return out;
+}
+
+double correction_prior_minimum(rust::Str model, rust::Slice<const double> board,
+                                rust::Slice<const double> corrections,
+                                rust::Slice<const double> weight) {
+  double out = 0.0;
+  const bool known = DispatchBoard(std::string(model), [&](auto board_model) {
+    constexpr int N = decltype(board_model)::kCornerSize;
+    if constexpr (N == 0) {
+      Fail("the board model has no static correction");
+    } else {
+      const size_t n = board.size() / 3;
+      if (board.size() != 3 * n || corrections.size() != kCorrectionStride * n ||
+          weight.size() != kCorrectionStride * n || n == 0) {
+        Fail("wrong sizes for the correction prior");
+      }
+      std::vector<double> delta(corrections.begin(), corrections.end());
+      std::vector<double> s(SimilaritySize(N), 0.0);
+      const double zeros[kCorrectionStride] = {0.0, 0.0, 0.0};
+      ceres::Problem problem;
+      for (size_t c = 0; c < n; ++c) {
+        double* block = &delta[kCorrectionStride * c];
+        problem.AddResidualBlock(new CorrectionPrior<N>(zeros, &weight[kCorrectionStride * c],
+                                                        &board[3 * c]),
+                                 nullptr, block, s.data());
+        problem.SetParameterBlockConstant(block);
+      }
+      ceres::Solver::Options o;
+      o.linear_solver_type = ceres::DENSE_QR;
+      o.logging_type = ceres::SILENT;
+      o.function_tolerance = o.parameter_tolerance = o.gradient_tolerance = 1e-16;
+      ceres::Solver::Summary summary;
+      ceres::Solve(o, &problem, &summary);
+      out = 2.0 * summary.final_cost;
+    }
   });
   if (!known) Fail("unknown board model `" + std::string(model) + "`");
   return out;

@@ -210,6 +210,18 @@ pub mod ffi {
             frame_extra: &[f64],
             correction: &[f64],
         ) -> Result<Vec<f64>>;
+
+        // Only the prior's invariance test calls this.
+        #[allow(dead_code)]
+        /// The static-correction prior's sum of squares (`cpp/priors.h`, zero mean)
+        /// over corners at `board` (3 each) with `corrections` and `weight` (3 each),
+        /// minimised over its similarity.
+        fn correction_prior_minimum(
+            model: &str,
+            board: &[f64],
+            corrections: &[f64],
+            weight: &[f64],
+        ) -> Result<f64>;
     }
 }
 

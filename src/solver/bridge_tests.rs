@@ -390,3 +390,95 @@ fn bad_bundle_input_is_an_error() {
     d.intrinsics.pop();
     assert!(bridge::solve_bundle(&mut d).is_err());
 }
+
+#[test]
+fn the_correction_prior_is_blind_to_a_similarity_of_the_whole_correction() {
+    // Closed form: the prior minimised over its similarity is the weighted
+    // least-squares residual of the correction against the similarity directions
+    // (translation, rotation ω × x, scale x; in-plane for `full`), built here
+    // independently of the C++ functor's Jacobian.
+    use nalgebra::{DMatrix, DVector, Vector3};
+    let board: Vec<Vector3<f64>> = (0..20)
+        .map(|i| Vector3::new(0.03 * (i % 5) as f64, 0.03 * (i / 5) as f64, 0.0))
+        .collect();
+    let flat: Vec<f64> = board.iter().flat_map(|x| x.iter().copied()).collect();
+    let wobble = |i: usize, k: usize| 1e-4 * ((7 * i + 3 * k) as f64 * 0.9).sin();
+    let delta: Vec<f64> = (0..60).map(|j| wobble(j / 3, j % 3)).collect();
+    let weight: Vec<f64> = (0..60).map(|j| 1500.0 + 40.0 * (j % 7) as f64).collect();
+    for (model, dims) in [("static", 3), ("full", 2), ("full4", 2)] {
+        let (e0, e1, e2) = (Vector3::x(), Vector3::y(), Vector3::z());
+        let directions = |x: &Vector3<f64>| -> Vec<Vector3<f64>> {
+            if dims == 3 {
+                vec![e0, e1, e2, e0.cross(x), e1.cross(x), e2.cross(x), *x]
+            } else {
+                vec![e0, e1, e2.cross(x), *x]
+            }
+        };
+        let g = directions(&board[0]).len();
+        let mut b = DMatrix::<f64>::zeros(dims * board.len(), g);
+        let mut r = DVector::<f64>::zeros(dims * board.len());
+        for (i, x) in board.iter().enumerate() {
+            for (c, v) in directions(x).iter().enumerate() {
+                for k in 0..dims {
+                    b[(dims * i + k, c)] = weight[3 * i + k] * v[k];
+                }
+            }
+            for k in 0..dims {
+                r[dims * i + k] = weight[3 * i + k] * delta[3 * i + k];
+            }
+        }
+        let s = b.clone().svd(true, true).solve(&r, 1e-14).unwrap();
+        let expected = (&r - &b * s).norm_squared();
+        let minimum =
+            |d: &[f64]| bridge::correction_prior_minimum(model, &flat, d, &weight).unwrap();
+        let plain = minimum(&delta);
+        assert!(
+            (plain - expected).abs() < 1e-9 * expected,
+            "{model}: {plain} vs closed form {expected}"
+        );
+        // Adding a similarity to every corner's correction changes nothing.
+        let t = [2e-4, -1e-4, 3e-4, 1e-3, -2e-3, 1.5e-3, 2e-3];
+        let mut moved = delta.clone();
+        for (i, x) in board.iter().enumerate() {
+            let v: Vector3<f64> = directions(x).iter().zip(&t).map(|(d, a)| d * *a).sum();
+            for k in 0..dims {
+                moved[3 * i + k] += v[k];
+            }
+        }
+        let after = minimum(&moved);
+        assert!(
+            (after - plain).abs() < 1e-9 * plain,
+            "{model}: {after} vs {plain}"
+        );
+        // Anything else is seen: one corner moved alone.
+        moved[3 * 7] += 1e-4;
+        assert!(minimum(&moved) > plain * 1.01, "{model}");
+    }
+    assert!(bridge::correction_prior_minimum("standard", &flat, &delta, &weight).is_err());
+}
+
+#[test]
+fn the_correction_priors_similarity_stays_out_of_the_jacobian() {
+    // The similarity block lives outside the parameter buffer: the Jacobian that
+    // Rust reads (covariance, board.json) has the same columns with the prior.
+    for model in ["static", "full"] {
+        let plain = tiny(model);
+        let mut with = tiny(model);
+        with.correction_prior_weight = vec![100.0; 12];
+        for direct in [false, true] {
+            let columns = |d: &ProblemData| -> Vec<u32> {
+                if direct {
+                    bridge::jacobian(d, &options())
+                        .unwrap()
+                        .column_parameters()
+                        .to_vec()
+                } else {
+                    bridge::evaluate(d, &options(), true)
+                        .unwrap()
+                        .jacobian_col_param
+                }
+            };
+            assert_eq!(columns(&with), columns(&plain), "{model}, direct {direct}");
+        }
+    }
+}
