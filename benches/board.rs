@@ -61,6 +61,20 @@ fn protocol_rows(
     setup.run(None, &|| {})
 }
 
+/// The four methods' mean ± std, then static/standard and full/dynamic, as table cells.
+fn method_cells(r: &[(Method, f64, f64, usize)]) -> String {
+    let cells: Vec<String> = r
+        .iter()
+        .map(|m| format!("{:.3} ± {:.3}", m.1, m.2))
+        .collect();
+    format!(
+        "{} | {:.2} | {:.2}",
+        cells.join(" | "),
+        r[1].1 / r[0].1,
+        r[3].1 / r[2].1
+    )
+}
+
 /// Mean and standard deviation of the truth mapping error per method.
 fn summarise(rows: &[deformcal::app::protocol::Row]) -> Vec<(Method, f64, f64, usize)> {
     Method::ALL
@@ -122,16 +136,7 @@ fn prior() {
             }
             let start = std::time::Instant::now();
             let r = protocol(preset, extra, scale);
-            let cell = |i: usize| format!("{:.3} ± {:.3}", r[i].1, r[i].2);
-            println!(
-                "| {name} | {label} | {} | {} | {} | {} | {:.2} | {:.2} |",
-                cell(0),
-                cell(1),
-                cell(2),
-                cell(3),
-                r[1].1 / r[0].1,
-                r[3].1 / r[2].1
-            );
+            println!("| {name} | {label} | {} |", method_cells(&r));
             eprintln!("{name} {label}: {:.0} s", start.elapsed().as_secs_f64());
         }
     }
@@ -387,18 +392,12 @@ fn t4() {
             v.iter().sum::<f64>() / v.len() as f64
         };
         let r = summarise(&rows);
-        let cell = |i: usize| format!("{:.3} ± {:.3}", r[i].1, r[i].2);
         println!(
-            "| {name} {extra} (RMSE standard {:.3}, static {:.3}, dynamic {:.3}) | {} | {} | {} | {} | {:.2} | {:.2} |",
+            "| {name} {extra} (RMSE standard {:.3}, static {:.3}, dynamic {:.3}) | {} |",
             rmse(Method::Standard),
             rmse(Method::Static),
             rmse(Method::Dynamic),
-            cell(0),
-            cell(1),
-            cell(2),
-            cell(3),
-            r[1].1 / r[0].1,
-            r[3].1 / r[2].1
+            method_cells(&r)
         );
     }
 }
