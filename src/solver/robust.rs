@@ -235,13 +235,7 @@ fn robust_sigma(residuals: &[f64]) -> f64 {
 /// error (a bend `standard` cannot follow) moves neighbours alike and cancels
 /// here; a bad detection does not. Without a neighbour, the residual itself.
 fn local_deviations(dataset: &Dataset, residuals: &[f64]) -> Vec<f64> {
-    let cols = dataset.target.cols;
-    let index: HashMap<(usize, usize, usize), usize> = dataset
-        .observations
-        .iter()
-        .enumerate()
-        .map(|(i, o)| ((o.camera, o.frame, o.corner), i))
-        .collect();
+    let index = CornerIndex::new(dataset);
     let median = |v: &mut Vec<f64>| {
         v.sort_by(f64::total_cmp);
         let n = v.len();
@@ -251,38 +245,98 @@ fn local_deviations(dataset: &Dataset, residuals: &[f64]) -> Vec<f64> {
             0.5 * (v[n / 2 - 1] + v[n / 2])
         }
     };
+    let mut us = Vec::with_capacity(4);
+    let mut vs = Vec::with_capacity(4);
     dataset
         .observations
         .iter()
         .enumerate()
         .map(|(i, o)| {
-            let (row, col) = (o.corner / cols, o.corner % cols);
-            let mut neighbours = Vec::with_capacity(4);
-            if col > 0 {
-                neighbours.push(o.corner - 1);
+            us.clear();
+            vs.clear();
+            for c in board_neighbours(o.corner, &dataset.target) {
+                if let Some(j) = index.get(i, c) {
+                    us.push(residuals[2 * j]);
+                    vs.push(residuals[2 * j + 1]);
+                }
             }
-            if col + 1 < cols {
-                neighbours.push(o.corner + 1);
-            }
-            if row > 0 {
-                neighbours.push(o.corner - cols);
-            }
-            neighbours.push(o.corner + cols);
-            let found: Vec<usize> = neighbours
-                .into_iter()
-                .filter_map(|c| index.get(&(o.camera, o.frame, c)).copied())
-                .collect();
             let r = &residuals[2 * i..2 * i + 2];
-            if found.is_empty() {
+            if us.is_empty() {
                 return r[0].abs().max(r[1].abs());
             }
-            let mut us: Vec<f64> = found.iter().map(|&j| residuals[2 * j]).collect();
-            let mut vs: Vec<f64> = found.iter().map(|&j| residuals[2 * j + 1]).collect();
             (r[0] - median(&mut us))
                 .abs()
                 .max((r[1] - median(&mut vs)).abs())
         })
         .collect()
+}
+
+/// The (up to four) corners next to `corner` on the board: left, right, above and
+/// below, in that order.
+fn board_neighbours(
+    corner: usize,
+    target: &crate::model::target::Target,
+) -> impl Iterator<Item = usize> {
+    let cols = target.cols;
+    let (row, col) = (corner / cols, corner % cols);
+    [
+        (col > 0).then(|| corner - 1),
+        (col + 1 < cols).then(|| corner + 1),
+        (row > 0).then(|| corner - cols),
+        Some(corner + cols),
+    ]
+    .into_iter()
+    .flatten()
+}
+
+/// Observation index by (view, corner) in flat arrays: the rejection rounds look
+/// up every corner's neighbours, and hashing 10⁶ keys per round cost more than
+/// the re-solve's own bookkeeping on large datasets.
+struct CornerIndex {
+    /// Each observation's view, numbered densely.
+    view_of: Vec<usize>,
+    /// `slots[view · corners + corner]`: the observation, or `usize::MAX`.
+    slots: Vec<usize>,
+    corners: usize,
+}
+
+impl CornerIndex {
+    fn new(dataset: &Dataset) -> Self {
+        let corners = dataset
+            .observations
+            .iter()
+            .map(|o| o.corner + 1)
+            .max()
+            .unwrap_or(0)
+            .max(dataset.target.num_corners());
+        let mut views: HashMap<(usize, usize), usize> = HashMap::new();
+        let view_of: Vec<usize> = dataset
+            .observations
+            .iter()
+            .map(|o| {
+                let next = views.len();
+                *views.entry((o.camera, o.frame)).or_insert(next)
+            })
+            .collect();
+        let mut slots = vec![usize::MAX; views.len() * corners];
+        for (i, o) in dataset.observations.iter().enumerate() {
+            slots[view_of[i] * corners + o.corner] = i;
+        }
+        CornerIndex {
+            view_of,
+            slots,
+            corners,
+        }
+    }
+
+    /// The observation of `corner` in observation `i`'s view, if there is one.
+    fn get(&self, i: usize, corner: usize) -> Option<usize> {
+        if corner >= self.corners {
+            return None;
+        }
+        let j = self.slots[self.view_of[i] * self.corners + corner];
+        (j != usize::MAX).then_some(j)
+    }
 }
 
 /// Which observations to reject this round: those whose residual stands out from
@@ -311,18 +365,12 @@ fn pick_outliers(dataset: &Dataset, residuals: &[f64], k: f64) -> Vec<usize> {
         .filter(|&(_, e)| e > k * sigma)
         .collect();
     worst.sort_by(|a, b| b.1.total_cmp(&a.1));
-    let cols = dataset.target.cols;
     let mut taken: std::collections::HashSet<(usize, usize, usize)> = Default::default();
     let mut out = Vec::new();
     for (i, _) in worst {
         let o = &dataset.observations[i];
-        let near = |c: usize| {
-            let (a, b) = (c.min(o.corner), c.max(o.corner));
-            (b - a == 1 && a / cols == b / cols) || b - a == cols
-        };
-        if taken
-            .iter()
-            .any(|&(cam, f, c)| cam == o.camera && f == o.frame && near(c))
+        if board_neighbours(o.corner, &dataset.target)
+            .any(|c| taken.contains(&(o.camera, o.frame, c)))
         {
             continue;
         }
