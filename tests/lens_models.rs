@@ -401,7 +401,8 @@ impl Ratios {
 /// more seeds, with board priors and fixed lens terms to compare
 /// (`cargo test --release --test lens_models -- --ignored --nocapture`;
 /// env `LENS_SEEDS`, `LENS_MODELS`, `LENS_STATIC_MM`, `LENS_BEND_MM`,
-/// `LENS_BEND_AUTO` (`bend_prior_mm = "auto"`), `LENS_PRIOR` (σ, or `none`), `LENS_FIX`,
+/// `LENS_BEND_AUTO` (`bend_prior_mm = "auto"`), `LENS_STATIC_AUTO`
+/// (`static_prior_mm = "auto"`), `LENS_PRIOR` (σ, or `none`), `LENS_FIX`,
 /// `LENS_MEDIAN` for medians, `LENS_EXPECTED` for the covariance's prediction).
 #[test]
 #[ignore]
@@ -416,6 +417,7 @@ fn bending_board_experiment() {
     settings.board.static_sigma_m = mm("LENS_STATIC_MM");
     settings.board.bend_sigma_m = mm("LENS_BEND_MM");
     settings.board.bend_sigma_auto = var("LENS_BEND_AUTO").is_some();
+    settings.board.static_sigma_auto = var("LENS_STATIC_AUTO").is_some();
     if let Some(p) = var("LENS_PRIOR") {
         settings.lens_prior_sigma = p.parse().ok();
     }
