@@ -3,9 +3,10 @@
 //! intrinsics (plain, and with the virtual rotation of SPEC §3 profiled out) and the
 //! projection-uncertainty map over the image. Pure arithmetic on Σ_θ; computing
 //! Σ_θ from a solve is `solver::uncertainty`'s.
-use crate::model::lens::Intrinsics;
+use crate::model::lens::{Intrinsics, LensModel, MAX_PARAMS};
 use crate::model::metrics::grid_rays;
 use nalgebra::{DMatrix, Matrix2, Matrix2x3, Matrix3, Rotation3, Vector2, Vector3};
+use std::sync::{Arc, Mutex, OnceLock};
 
 /// Why a calibration has no uncertainty figures.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -87,14 +88,54 @@ fn rotation_jacobian(k: &Intrinsics, ray: &Vector3<f64>) -> Option<Matrix2x3<f64
     Some(out)
 }
 
+/// The mapping-error grid's quadratic forms (H, H with the rotation profiled out, M).
+pub type MappingForms = (DMatrix<f64>, DMatrix<f64>, usize);
+
+/// Exact bits of the inputs of [`mapping_forms`]: a hit is the computation's own value.
+type FormsKey = (LensModel, [u64; MAX_PARAMS], u32, u32);
+
+/// The forms of the last few cameras asked for, each computed once (the `OnceLock`:
+/// concurrent askers of one camera wait for the first, others run on).
+type FormsCache = Vec<(FormsKey, Arc<OnceLock<Option<MappingForms>>>)>;
+
+/// How many cameras' forms [`mapping_forms`] keeps.
+const FORMS_KEPT: usize = 16;
+
 /// The mapping-error grid's quadratic forms: H = Σ J_gᵀJ_g and, with the virtual
 /// rotation ω profiled out, H − C (KᵀK)⁻¹ Cᵀ (C = Σ J_gᵀK_g, KᵀK = Σ K_gᵀK_g),
 /// each over the M grid points; `None` without a usable grid point.
-pub fn mapping_forms(
-    k: &Intrinsics,
-    width: u32,
-    height: u32,
-) -> Option<(DMatrix<f64>, DMatrix<f64>, usize)> {
+///
+/// Remembered for the last [`FORMS_KEPT`] cameras: a result's summary,
+/// `calibration.json` and report each ask for the same camera's forms, and the
+/// grid's unprojections and central differences are most of their cost.
+pub fn mapping_forms(k: &Intrinsics, width: u32, height: u32) -> Option<MappingForms> {
+    static CACHE: Mutex<FormsCache> = Mutex::new(Vec::new());
+    let mut bits = [0u64; MAX_PARAMS];
+    for (b, v) in bits.iter_mut().zip(k.params()) {
+        *b = v.to_bits();
+    }
+    let key = (k.model(), bits, width, height);
+    let cell = {
+        // A panic elsewhere while the lock was held leaves the list itself valid.
+        let mut cache = CACHE.lock().unwrap_or_else(|e| e.into_inner());
+        match cache.iter().position(|(k, _)| *k == key) {
+            Some(i) => cache[i].1.clone(),
+            None => {
+                if cache.len() >= FORMS_KEPT {
+                    cache.remove(0);
+                }
+                let cell = Arc::new(OnceLock::new());
+                cache.push((key, cell.clone()));
+                cell
+            }
+        }
+    };
+    cell.get_or_init(|| compute_mapping_forms(k, width, height))
+        .clone()
+}
+
+/// [`mapping_forms`] computed afresh.
+pub fn compute_mapping_forms(k: &Intrinsics, width: u32, height: u32) -> Option<MappingForms> {
     let n = k.params().len();
     let (mut h, mut c, mut kk) = (DMatrix::zeros(n, n), DMatrix::zeros(n, 3), Matrix3::zeros());
     let mut m = 0;
