@@ -49,40 +49,42 @@ pub fn write_calibration(dir: &Path, c: &Calibration) -> Result<Written> {
 
 /// [`write_calibration`], the report naming each frame's image file from `labels`.
 ///
-/// Two independent halves run side by side (rayon): the model files, exports,
-/// `outliers.csv` and `board.json`; and the uncertainty maps with the report,
-/// which embeds the maps' own text. Neither reads what the other writes, so the
-/// files are those of writing them one after the other.
+/// Three independent parts run side by side (rayon): the model files, exports and
+/// `outliers.csv`; `board.json` (its own covariance); and the uncertainty maps
+/// with the report, which embeds the maps' own text. None reads what another
+/// writes, so the files are those of writing them one after the other.
 pub fn write_calibration_labelled(
     dir: &Path,
     c: &Calibration,
     labels: &FrameFiles,
 ) -> Result<Written> {
     std::fs::create_dir_all(dir).map_err(|e| Error::write(dir, e))?;
-    let (written, report) = rayon::join(
-        || -> Result<Written> {
-            let inputs = exports::optimization_inputs(c);
-            let written = write_models(dir, &CalibrationJson::from(c), &inputs)?;
-            write_atomic(&dir.join("outliers.csv"), &suspects_csv(c)?)?;
-            crate::app::board_json::write(dir, c)?;
-            Ok(written)
-        },
-        || -> Result<()> {
-            let maps = crate::app::uncertainty_plot::render_maps(dir, c)?;
-            let mut embedded = Vec::with_capacity(maps.len());
-            for map in maps {
-                embedded.push(match map {
-                    Some((path, svg)) => {
-                        write_atomic(&path, svg.as_bytes())?;
-                        Some(svg.into_bytes())
-                    }
-                    None => None,
-                });
-            }
-            html_report::write_calibration_report_with(dir, c, labels, &embedded)
-        },
+    let models = || -> Result<Written> {
+        let inputs = exports::optimization_inputs(c);
+        let written = write_models(dir, &CalibrationJson::from(c), &inputs)?;
+        write_atomic(&dir.join("outliers.csv"), &suspects_csv(c)?)?;
+        Ok(written)
+    };
+    let report = || -> Result<()> {
+        let maps = crate::app::uncertainty_plot::render_maps(dir, c)?;
+        let mut embedded = Vec::with_capacity(maps.len());
+        for map in maps {
+            embedded.push(match map {
+                Some((path, svg)) => {
+                    write_atomic(&path, svg.as_bytes())?;
+                    Some(svg.into_bytes())
+                }
+                None => None,
+            });
+        }
+        html_report::write_calibration_report_with(dir, c, labels, &embedded)
+    };
+    let ((written, board), report) = rayon::join(
+        || rayon::join(models, || crate::app::board_json::write(dir, c)),
+        report,
     );
     let written = written?;
+    board?;
     report?;
     Ok(written)
 }

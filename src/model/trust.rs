@@ -159,6 +159,7 @@ pub fn assess(residuals: &[f64], parameters: usize, noise_px: f64, source: &'sta
 mod tests {
     use super::*;
     use crate::model::camera::CameraSpec;
+    use crate::model::dataset::Observation;
     use crate::model::target::Target;
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
@@ -180,6 +181,79 @@ mod tests {
             vec![CameraSpec::new("c", 640, 480, Default::default())],
             obs,
         )
+    }
+
+    /// A dataset as a file may hold one: two cameras, corners missing, rows in
+    /// no order, a corner of a view observed twice, weights other than 1.
+    fn messy(seed: u64) -> (Dataset, Vec<f64>) {
+        use rand::seq::SliceRandom;
+        use rand::Rng;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let mut d = board(6, 7, 5);
+        d.cameras
+            .push(CameraSpec::new("d", 640, 480, Default::default()));
+        let mut obs = Vec::new();
+        for camera in 0..2 {
+            for o in &d.observations {
+                if rng.gen_bool(0.85) {
+                    let weight = if rng.gen_bool(0.3) { 0.5 } else { 1.0 };
+                    obs.push(Observation {
+                        camera,
+                        weight,
+                        ..o.clone()
+                    });
+                }
+            }
+        }
+        for _ in 0..10 {
+            let dup = obs[rng.gen_range(0..obs.len())].clone();
+            obs.push(dup);
+        }
+        obs.shuffle(&mut rng);
+        d.observations = obs;
+        let residuals = (0..2 * d.observations.len())
+            .map(|_| rng.gen_range(-1.0..1.0))
+            .collect();
+        (d, residuals)
+    }
+
+    /// The map-based computation the dense one replaced, as the reference.
+    fn second_differences_by_map(dataset: &Dataset, residuals: &[f64]) -> Vec<f64> {
+        let cols = dataset.target.cols;
+        let mut at = std::collections::BTreeMap::new();
+        for (o, r) in dataset.observations.iter().zip(residuals.chunks_exact(2)) {
+            at.insert(
+                (o.camera, o.frame, o.corner),
+                [r[0] * o.weight, r[1] * o.weight],
+            );
+        }
+        let mut out = Vec::new();
+        for (&(camera, frame, corner), r) in &at {
+            let col = corner % cols;
+            let horizontal = (col >= 1 && col + 1 < cols).then(|| (corner - 1, corner + 1));
+            let vertical = (corner >= cols).then(|| (corner - cols, corner + cols));
+            for (a, b) in [horizontal, vertical].into_iter().flatten() {
+                if let (Some(p), Some(q)) =
+                    (at.get(&(camera, frame, a)), at.get(&(camera, frame, b)))
+                {
+                    out.push(
+                        (p[0] - 2.0 * r[0] + q[0]).powi(2) + (p[1] - 2.0 * r[1] + q[1]).powi(2),
+                    );
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn second_differences_equal_the_map_based_ones_in_order() {
+        for seed in 0..5 {
+            let (d, residuals) = messy(seed);
+            let dense = second_differences(&d, &residuals);
+            assert!(dense.len() > 100);
+            // Bit for bit and in the same order: σ̂ sums them.
+            assert_eq!(dense, second_differences_by_map(&d, &residuals));
+        }
     }
 
     #[test]
