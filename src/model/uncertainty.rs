@@ -330,6 +330,48 @@ mod tests {
     }
 
     #[test]
+    fn remembered_forms_are_the_computed_ones() {
+        // More cameras than are kept, asked from several threads at once, twice
+        // each: every answer is the fresh computation's, bit for bit, and a
+        // camera one ulp away from another gets its own.
+        let cameras: Vec<Intrinsics> = (0..FORMS_KEPT + 4)
+            .map(|i| {
+                let mut k = lens();
+                k.params_mut()[4] = -0.2 + 0.01 * i as f64;
+                k
+            })
+            .chain(std::iter::once({
+                let mut k = lens();
+                k.params_mut()[0] = f64::from_bits(k.params()[0].to_bits() + 1);
+                k
+            }))
+            .collect();
+        let fresh: Vec<_> = cameras
+            .iter()
+            .map(|k| compute_mapping_forms(k, 320, 240))
+            .collect();
+        std::thread::scope(|s| {
+            for t in 0..3 {
+                let (cameras, fresh) = (&cameras, &fresh);
+                s.spawn(move || {
+                    for round in 0..2 {
+                        for i in 0..cameras.len() {
+                            let i = (i + 7 * t + round) % cameras.len();
+                            let got = mapping_forms(&cameras[i], 320, 240);
+                            assert!(got.is_some());
+                            assert_eq!(got, fresh[i], "camera {i}");
+                        }
+                    }
+                });
+            }
+        });
+        let (h, _, _) = mapping_forms(&lens(), 320, 240).unwrap();
+        let (h_ulp, _, _) = mapping_forms(cameras.last().unwrap(), 320, 240).unwrap();
+        assert_eq!(h_ulp, fresh.last().unwrap().as_ref().unwrap().0);
+        assert_ne!(h, h_ulp);
+    }
+
+    #[test]
     fn map_of_a_focal_length_error_grows_from_the_centre() {
         // Only fx uncertain (σ 1 px) without distortion: a ray at u lands off by
         // σ·(u − cx)/fx, zero on the column through cx.
