@@ -200,13 +200,13 @@ mod tests {
                     obs.push(Observation {
                         camera,
                         weight,
-                        ..o.clone()
+                        ..*o
                     });
                 }
             }
         }
         for _ in 0..10 {
-            let dup = obs[rng.gen_range(0..obs.len())].clone();
+            let dup = obs[rng.gen_range(0..obs.len())];
             obs.push(dup);
         }
         obs.shuffle(&mut rng);
