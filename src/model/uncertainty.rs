@@ -6,7 +6,7 @@
 use crate::model::lens::{Intrinsics, LensModel, MAX_PARAMS};
 use crate::model::metrics::grid_rays;
 use nalgebra::{DMatrix, Matrix2, Matrix2x3, Matrix3, Rotation3, Vector2, Vector3};
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::{Arc, LazyLock, Mutex, OnceLock};
 
 /// Why a calibration has no uncertainty figures.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -77,12 +77,21 @@ pub fn projection_jacobian(k: &Intrinsics, ray: &Vector3<f64>) -> Option<DMatrix
 
 /// K = ∂project_θ(R(ω)·ray)/∂ω at ω = 0 (2 × 3), by central differences.
 fn rotation_jacobian(k: &Intrinsics, ray: &Vector3<f64>) -> Option<Matrix2x3<f64>> {
+    // The six rotations are the same for every ray: made once.
+    static STEPS: LazyLock<[(Rotation3<f64>, Rotation3<f64>); 3]> = LazyLock::new(|| {
+        std::array::from_fn(|a| {
+            let mut w = Vector3::zeros();
+            w[a] = ROTATION_STEP;
+            (
+                Rotation3::from_scaled_axis(w),
+                Rotation3::from_scaled_axis(-w),
+            )
+        })
+    });
     let mut out = Matrix2x3::zeros();
-    for a in 0..3 {
-        let mut w = Vector3::zeros();
-        w[a] = ROTATION_STEP;
-        let plus = k.project(&(Rotation3::from_scaled_axis(w) * ray))?;
-        let minus = k.project(&(Rotation3::from_scaled_axis(-w) * ray))?;
+    for (a, (plus, minus)) in STEPS.iter().enumerate() {
+        let plus = k.project(&(plus * ray))?;
+        let minus = k.project(&(minus * ray))?;
         out.set_column(a, &((plus - minus) / (2.0 * ROTATION_STEP)));
     }
     Some(out)
