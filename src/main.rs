@@ -278,18 +278,29 @@ fn run_calibrate(args: CalibrateArgs) -> Result<()> {
     let request = request_of(&config, result.method);
     result.detector_noise_px = config.calibration.detector_noise_px;
     // The summary's own warnings go to stdout; these go to stderr, and all to the JSON.
-    let summary = report::summary(&result);
+    let own = result.warnings.len();
     let mut warnings = loaded.warnings.clone();
     warnings.extend(lint::flipped_frames(&result, &loaded.files));
     result.warnings.extend(warnings.iter().cloned());
-    let failure = guard::judge(&loaded.dataset, &request, &result, rules, &loaded.files);
-    let written = match &failure {
-        None => output::write_calibration_labelled(set.path(), &result, &loaded.files)?.warnings,
-        Some(f) => {
-            output::write_failed(set.path(), &result, f)?;
-            Vec::new()
-        }
-    };
+    // The summary is made while the files are written (on another core).
+    let staging = set.path();
+    let (summary, written) = rayon::join(
+        || report::summary_with(&result, &result.warnings[..own]),
+        || -> Result<_> {
+            let failure = guard::judge(&loaded.dataset, &request, &result, rules, &loaded.files);
+            let written = match &failure {
+                None => {
+                    output::write_calibration_labelled(staging, &result, &loaded.files)?.warnings
+                }
+                Some(f) => {
+                    output::write_failed(staging, &result, f)?;
+                    Vec::new()
+                }
+            };
+            Ok((failure, written))
+        },
+    );
+    let (failure, written) = written?;
     set.commit()?;
     print!("{summary}");
     for w in warnings.iter().chain(&written) {

@@ -349,6 +349,53 @@ fn report_embeds_the_uncertainty_map_and_names_the_images() {
     assert_self_contained(&html);
 }
 
+/// The result files written side by side (the CLI's writer) are byte for byte
+/// those of the one-at-a-time writers: the models and exports, `outliers.csv`,
+/// `board.json`, the uncertainty map and the report that embeds it.
+#[test]
+fn parallel_writer_equals_the_writers_one_at_a_time() {
+    use deformcal::app::{board_json, calibration_json::CalibrationJson, exports, output};
+    let (d, _) = common::data(Preset::T2, 8, 3, 1.0, 1.0);
+    let c = common::run(&d, Method::Full, Loss::Cauchy);
+    let labels: FrameLabels = [((0, d.frame_ids[0]), "photos/first.png".to_string())].into();
+    let (parallel, serial) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let written = output::write_calibration_labelled(parallel.path(), &c, &labels).unwrap();
+    let inputs = exports::optimization_inputs(&c);
+    let one = output::write_models(serial.path(), &CalibrationJson::from(&c), &inputs).unwrap();
+    assert_eq!(written.warnings, one.warnings);
+    let outliers = output::suspects_csv(&c).unwrap();
+    std::fs::write(serial.path().join("outliers.csv"), outliers).unwrap();
+    board_json::write(serial.path(), &c).unwrap();
+    deformcal::app::uncertainty_plot::write_maps(serial.path(), &c).unwrap();
+    html_report::write_calibration_report(serial.path(), &c, &labels).unwrap();
+    let files = |dir: &Path| {
+        let mut names: Vec<String> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        names
+    };
+    let names = files(parallel.path());
+    assert_eq!(names, files(serial.path()));
+    for needed in [
+        "board.json",
+        "report.html",
+        "uncertainty_cam0.svg",
+        "calibration.json",
+    ] {
+        assert!(
+            names.iter().any(|n| n == needed),
+            "{needed} missing: {names:?}"
+        );
+    }
+    for name in &names {
+        let a = std::fs::read(parallel.path().join(name)).unwrap();
+        let b = std::fs::read(serial.path().join(name)).unwrap();
+        assert!(a == b, "{name} differs between the two writers");
+    }
+}
+
 /// Images read from a corners.vnl keep their file names for the report: each
 /// name labels the frame that holds exactly that image's corners.
 #[test]

@@ -225,9 +225,55 @@ impl OutputSet {
         };
         std::fs::rename(&new, &target).map_err(|e| Error::write(&target, e))?;
         if let Some(old) = old {
-            let _ = std::fs::remove_dir_all(old);
+            remove_tree(&old);
         }
         Ok(())
+    }
+}
+
+/// Most threads [`remove_tree`] unlinks with.
+const UNLINK_THREADS: usize = 16;
+
+/// Removes directory `dir` and everything in it, best effort (the set is already
+/// swapped in), the entries of its sub-directories side by side: on a file system
+/// mounted with `discard` each unlink of a synced file waits for its blocks to be
+/// trimmed, 1–9 ms each on this project's machines, and concurrent unlinks share
+/// the wait.
+fn remove_tree(dir: &Path) {
+    let mut files = Vec::new();
+    let mut dirs = vec![dir.to_path_buf()];
+    let mut i = 0;
+    while i < dirs.len() {
+        if let Ok(entries) = std::fs::read_dir(&dirs[i]) {
+            for entry in entries.flatten() {
+                match entry.file_type() {
+                    Ok(t) if t.is_dir() => dirs.push(entry.path()),
+                    _ => files.push(entry.path()),
+                }
+            }
+        }
+        i += 1;
+    }
+    let per_thread = files.len().div_ceil(UNLINK_THREADS).max(1);
+    std::thread::scope(|s| {
+        for chunk in files.chunks(per_thread) {
+            let unlink = move || {
+                for f in chunk {
+                    let _ = std::fs::remove_file(f);
+                }
+            };
+            // Without a thread to be had, the files go one after the other.
+            if std::thread::Builder::new().spawn_scoped(s, unlink).is_err() {
+                unlink();
+            }
+        }
+    });
+    // Deepest first; whatever is left (a file that appeared meanwhile) goes the plain way.
+    for d in dirs.iter().rev() {
+        let _ = std::fs::remove_dir(d);
+    }
+    if dir.exists() {
+        let _ = std::fs::remove_dir_all(dir);
     }
 }
 

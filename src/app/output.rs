@@ -48,18 +48,49 @@ pub fn write_calibration(dir: &Path, c: &Calibration) -> Result<Written> {
 }
 
 /// [`write_calibration`], the report naming each frame's image file from `labels`.
-/// The report is written last: it embeds the files it finds beside it.
+///
+/// The parts run side by side (rayon), in two rounds: first what does not need
+/// the uncertainty figures (the mrcal problem, `outliers.csv`, the uncertainty
+/// maps, `board.json` with its own covariance), while a caller's summary may be
+/// computing those figures on the other core; then `calibration.json` with the
+/// exports, and the report, which embeds the maps' own text. No part reads what
+/// another writes, so the files are those of writing them one after the other.
 pub fn write_calibration_labelled(
     dir: &Path,
     c: &Calibration,
     labels: &FrameFiles,
 ) -> Result<Written> {
-    let inputs = exports::optimization_inputs(c);
-    let written = write_models(dir, &CalibrationJson::from(c), &inputs)?;
-    write_atomic(&dir.join("outliers.csv"), &suspects_csv(c)?)?;
-    crate::app::board_json::write(dir, c)?;
-    crate::app::uncertainty_plot::write_maps(dir, c)?;
-    html_report::write_calibration_report(dir, c, labels)?;
+    // Refused before any file is written, as `write_models` would.
+    check_model_files(c.dataset.cameras.iter().map(|cam| cam.name.as_str()))?;
+    std::fs::create_dir_all(dir).map_err(|e| Error::write(dir, e))?;
+    let inputs_and_outliers = || -> Result<exports::OptimizationInputs> {
+        write_atomic(&dir.join("outliers.csv"), &suspects_csv(c)?)?;
+        Ok(exports::optimization_inputs(c))
+    };
+    let maps = || -> Result<Vec<Option<Vec<u8>>>> {
+        let mut embedded = Vec::new();
+        for map in crate::app::uncertainty_plot::render_maps(dir, c)? {
+            embedded.push(match map {
+                Some((path, svg)) => {
+                    write_atomic(&path, svg.as_bytes())?;
+                    Some(svg.into_bytes())
+                }
+                None => None,
+            });
+        }
+        Ok(embedded)
+    };
+    let (inputs, (maps, board)) = rayon::join(inputs_and_outliers, || {
+        rayon::join(maps, || crate::app::board_json::write(dir, c))
+    });
+    let (inputs, maps) = (inputs?, maps?);
+    board?;
+    let (written, report) = rayon::join(
+        || write_models(dir, &CalibrationJson::from(c), &inputs),
+        || html_report::write_calibration_report_with(dir, c, labels, &maps),
+    );
+    let written = written?;
+    report?;
     Ok(written)
 }
 
@@ -121,18 +152,7 @@ pub fn write_models(
             f.reasons.join("; ")
         )));
     }
-    let mut files = std::collections::BTreeMap::new();
-    for cam in &json.cameras {
-        let file = exports::model_file_name(&cam.name);
-        if let Some(other) = files.insert(file.clone(), &cam.name) {
-            return Err(Error::Invalid(format!(
-                "cameras `{}` and `{}` would both be written as `{}`; rename one",
-                crate::app::config::short(other),
-                crate::app::config::short(&cam.name),
-                crate::app::config::short(&file)
-            )));
-        }
-    }
+    check_model_files(json.cameras.iter().map(|c| c.name.as_str()))?;
     std::fs::create_dir_all(dir).map_err(|e| Error::write(dir, e))?;
     let text = serde_json::to_string_pretty(json).expect("calibration serialises");
     let mut warnings = Vec::new();
@@ -167,6 +187,23 @@ pub fn write_models(
         calibration: path,
         warnings,
     })
+}
+
+/// Refuses cameras whose model files would have the same name.
+fn check_model_files<'a>(names: impl Iterator<Item = &'a str>) -> Result<()> {
+    let mut files = std::collections::BTreeMap::new();
+    for name in names {
+        let file = exports::model_file_name(name);
+        if let Some(other) = files.insert(file.clone(), name) {
+            return Err(Error::Invalid(format!(
+                "cameras `{}` and `{}` would both be written as `{}`; rename one",
+                crate::app::config::short(other),
+                crate::app::config::short(name),
+                crate::app::config::short(&file)
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// What a calibration wrote.

@@ -7,6 +7,13 @@ use std::fmt::Write;
 
 /// Method, RMSE, intrinsics, deformation, iterations and time, as a few lines of text.
 pub fn summary(c: &Calibration) -> String {
+    summary_with(c, &c.warnings)
+}
+
+/// [`summary`] with `warnings` in place of the calibration's own: the command line
+/// prints those it had before the input's were added, while the result files,
+/// written meanwhile from the same calibration, carry all of them.
+pub fn summary_with(c: &Calibration, warnings: &[String]) -> String {
     let mut s = String::new();
     let d = &c.dataset;
     let _ = writeln!(
@@ -41,7 +48,7 @@ pub fn summary(c: &Calibration) -> String {
     write_cameras(&mut s, c);
     write_rig(&mut s, c);
     write_board(&mut s, c);
-    for w in &c.warnings {
+    for w in warnings {
         let _ = writeln!(s, "  warning: {w}");
     }
     s

@@ -9,7 +9,7 @@ use crate::error::{Error, Result};
 use crate::model::uncertainty::{projection_uncertainty_map, UncertaintyMap};
 use crate::solver::calibrate::Calibration;
 use plotters::prelude::*;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Cells across the image in the map.
 pub const MAP_COLUMNS: usize = 64;
@@ -22,31 +22,40 @@ pub fn file_name(camera: &str) -> String {
 /// Writes every camera's map into `dir`; nothing when the calibration has no
 /// uncertainty (its summary and `calibration.json` say why).
 pub fn write_maps(dir: &Path, c: &Calibration) -> Result<()> {
+    for (path, svg) in render_maps(dir, c)?.into_iter().flatten() {
+        write_atomic(&path, svg.as_bytes())?;
+    }
+    Ok(())
+}
+
+/// Every camera's map as SVG with the path it goes to in `dir` (`None` for every
+/// camera when the calibration has no uncertainty), without writing it: the
+/// report embeds the same text.
+pub fn render_maps(dir: &Path, c: &Calibration) -> Result<Vec<Option<(PathBuf, String)>>> {
     let Ok(covariance) = c.intrinsics_covariance() else {
-        return Ok(());
+        return Ok(vec![None; c.dataset.cameras.len()]);
     };
     let noise = c
         .trust(c.detector_noise_px)
         .map_or(f64::NAN, |t| t.noise_px);
-    for ((cam, k), sigma) in c
-        .dataset
-        .cameras
-        .iter()
-        .zip(&c.state.intrinsics)
+    let cameras = c.dataset.cameras.iter().zip(&c.state.intrinsics);
+    let mut out: Vec<Option<(PathBuf, String)>> = cameras
         .zip(&covariance)
-    {
-        let map = projection_uncertainty_map(k, sigma, cam.width, cam.height, MAP_COLUMNS);
-        let title = format!(
-            "{}: predicted 1-σ projection error, worst direction (px); noise {noise:.3} px",
-            cam.name
-        );
-        let path = dir.join(file_name(&cam.name));
-        let mut svg = String::new();
-        draw(&mut svg, &title, &map)
-            .map_err(|e| Error::Invalid(format!("{}: plotting failed: {e}", path.display())))?;
-        write_atomic(&path, svg.as_bytes())?;
-    }
-    Ok(())
+        .map(|((cam, k), sigma)| {
+            let map = projection_uncertainty_map(k, sigma, cam.width, cam.height, MAP_COLUMNS);
+            let title = format!(
+                "{}: predicted 1-σ projection error, worst direction (px); noise {noise:.3} px",
+                cam.name
+            );
+            let path = dir.join(file_name(&cam.name));
+            let mut svg = String::new();
+            draw(&mut svg, &title, &map)
+                .map_err(|e| Error::Invalid(format!("{}: plotting failed: {e}", path.display())))?;
+            Ok(Some((path, svg)))
+        })
+        .collect::<Result<_>>()?;
+    out.resize(c.dataset.cameras.len(), None);
+    Ok(out)
 }
 
 /// Contour levels at a round step (1, 2, 2.5 or 5 × 10ⁿ), about eight from below

@@ -3,9 +3,10 @@
 //! intrinsics (plain, and with the virtual rotation of SPEC §3 profiled out) and the
 //! projection-uncertainty map over the image. Pure arithmetic on Σ_θ; computing
 //! Σ_θ from a solve is `solver::uncertainty`'s.
-use crate::model::lens::Intrinsics;
+use crate::model::lens::{Intrinsics, LensModel, MAX_PARAMS};
 use crate::model::metrics::grid_rays;
 use nalgebra::{DMatrix, Matrix2, Matrix2x3, Matrix3, Rotation3, Vector2, Vector3};
+use std::sync::{Arc, LazyLock, Mutex, OnceLock};
 
 /// Why a calibration has no uncertainty figures.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -76,25 +77,74 @@ pub fn projection_jacobian(k: &Intrinsics, ray: &Vector3<f64>) -> Option<DMatrix
 
 /// K = ∂project_θ(R(ω)·ray)/∂ω at ω = 0 (2 × 3), by central differences.
 fn rotation_jacobian(k: &Intrinsics, ray: &Vector3<f64>) -> Option<Matrix2x3<f64>> {
+    // The six rotations are the same for every ray: made once.
+    static STEPS: LazyLock<[(Rotation3<f64>, Rotation3<f64>); 3]> = LazyLock::new(|| {
+        std::array::from_fn(|a| {
+            let mut w = Vector3::zeros();
+            w[a] = ROTATION_STEP;
+            (
+                Rotation3::from_scaled_axis(w),
+                Rotation3::from_scaled_axis(-w),
+            )
+        })
+    });
     let mut out = Matrix2x3::zeros();
-    for a in 0..3 {
-        let mut w = Vector3::zeros();
-        w[a] = ROTATION_STEP;
-        let plus = k.project(&(Rotation3::from_scaled_axis(w) * ray))?;
-        let minus = k.project(&(Rotation3::from_scaled_axis(-w) * ray))?;
+    for (a, (plus, minus)) in STEPS.iter().enumerate() {
+        let plus = k.project(&(plus * ray))?;
+        let minus = k.project(&(minus * ray))?;
         out.set_column(a, &((plus - minus) / (2.0 * ROTATION_STEP)));
     }
     Some(out)
 }
 
+/// The mapping-error grid's quadratic forms (H, H with the rotation profiled out, M).
+pub type MappingForms = (DMatrix<f64>, DMatrix<f64>, usize);
+
+/// Exact bits of the inputs of [`mapping_forms`]: a hit is the computation's own value.
+type FormsKey = (LensModel, [u64; MAX_PARAMS], u32, u32);
+
+/// The forms of the last few cameras asked for, each computed once (the `OnceLock`:
+/// concurrent askers of one camera wait for the first, others run on).
+type FormsCache = Vec<(FormsKey, Arc<OnceLock<Option<MappingForms>>>)>;
+
+/// How many cameras' forms [`mapping_forms`] keeps.
+const FORMS_KEPT: usize = 16;
+
 /// The mapping-error grid's quadratic forms: H = Σ J_gᵀJ_g and, with the virtual
 /// rotation ω profiled out, H − C (KᵀK)⁻¹ Cᵀ (C = Σ J_gᵀK_g, KᵀK = Σ K_gᵀK_g),
 /// each over the M grid points; `None` without a usable grid point.
-pub fn mapping_forms(
-    k: &Intrinsics,
-    width: u32,
-    height: u32,
-) -> Option<(DMatrix<f64>, DMatrix<f64>, usize)> {
+///
+/// Remembered for the last [`FORMS_KEPT`] cameras: a result's summary,
+/// `calibration.json` and report each ask for the same camera's forms, and the
+/// grid's unprojections and central differences are most of their cost.
+pub fn mapping_forms(k: &Intrinsics, width: u32, height: u32) -> Option<MappingForms> {
+    static CACHE: Mutex<FormsCache> = Mutex::new(Vec::new());
+    let mut bits = [0u64; MAX_PARAMS];
+    for (b, v) in bits.iter_mut().zip(k.params()) {
+        *b = v.to_bits();
+    }
+    let key = (k.model(), bits, width, height);
+    let cell = {
+        // A panic elsewhere while the lock was held leaves the list itself valid.
+        let mut cache = CACHE.lock().unwrap_or_else(|e| e.into_inner());
+        match cache.iter().position(|(k, _)| *k == key) {
+            Some(i) => cache[i].1.clone(),
+            None => {
+                if cache.len() >= FORMS_KEPT {
+                    cache.remove(0);
+                }
+                let cell = Arc::new(OnceLock::new());
+                cache.push((key, cell.clone()));
+                cell
+            }
+        }
+    };
+    cell.get_or_init(|| compute_mapping_forms(k, width, height))
+        .clone()
+}
+
+/// [`mapping_forms`] computed afresh.
+pub fn compute_mapping_forms(k: &Intrinsics, width: u32, height: u32) -> Option<MappingForms> {
     let n = k.params().len();
     let (mut h, mut c, mut kk) = (DMatrix::zeros(n, n), DMatrix::zeros(n, 3), Matrix3::zeros());
     let mut m = 0;
@@ -286,6 +336,48 @@ mod tests {
         }
         assert_eq!(e.intrinsics_std[0].0, "fx");
         assert!((e.intrinsics_std[4].1 - sigma[(4, 4)].sqrt()).abs() < 1e-15);
+    }
+
+    #[test]
+    fn remembered_forms_are_the_computed_ones() {
+        // More cameras than are kept, asked from several threads at once, twice
+        // each: every answer is the fresh computation's, bit for bit, and a
+        // camera one ulp away from another gets its own.
+        let cameras: Vec<Intrinsics> = (0..FORMS_KEPT + 4)
+            .map(|i| {
+                let mut k = lens();
+                k.params_mut()[4] = -0.2 + 0.01 * i as f64;
+                k
+            })
+            .chain(std::iter::once({
+                let mut k = lens();
+                k.params_mut()[0] = f64::from_bits(k.params()[0].to_bits() + 1);
+                k
+            }))
+            .collect();
+        let fresh: Vec<_> = cameras
+            .iter()
+            .map(|k| compute_mapping_forms(k, 320, 240))
+            .collect();
+        std::thread::scope(|s| {
+            for t in 0..3 {
+                let (cameras, fresh) = (&cameras, &fresh);
+                s.spawn(move || {
+                    for round in 0..2 {
+                        for i in 0..cameras.len() {
+                            let i = (i + 7 * t + round) % cameras.len();
+                            let got = mapping_forms(&cameras[i], 320, 240);
+                            assert!(got.is_some());
+                            assert_eq!(got, fresh[i], "camera {i}");
+                        }
+                    }
+                });
+            }
+        });
+        let (h, _, _) = mapping_forms(&lens(), 320, 240).unwrap();
+        let (h_ulp, _, _) = mapping_forms(cameras.last().unwrap(), 320, 240).unwrap();
+        assert_eq!(h_ulp, fresh.last().unwrap().as_ref().unwrap().0);
+        assert_ne!(h, h_ulp);
     }
 
     #[test]

@@ -235,8 +235,8 @@ fn robust_sigma(residuals: &[f64]) -> f64 {
 /// error (a bend `standard` cannot follow) moves neighbours alike and cancels
 /// here; a bad detection does not. Without a neighbour, the residual itself.
 fn local_deviations(dataset: &Dataset, residuals: &[f64]) -> Vec<f64> {
-    let index = CornerIndex::new(dataset);
-    let median = |v: &mut Vec<f64>| {
+    let obs = &dataset.observations;
+    let median = |v: &mut [f64]| {
         v.sort_by(f64::total_cmp);
         let n = v.len();
         if n % 2 == 1 {
@@ -245,30 +245,43 @@ fn local_deviations(dataset: &Dataset, residuals: &[f64]) -> Vec<f64> {
             0.5 * (v[n / 2 - 1] + v[n / 2])
         }
     };
-    let mut us = Vec::with_capacity(4);
-    let mut vs = Vec::with_capacity(4);
-    dataset
-        .observations
-        .iter()
-        .enumerate()
-        .map(|(i, o)| {
-            us.clear();
-            vs.clear();
+    // One view at a time, its corners in a dense slot per board corner (the last
+    // observation of a corner seen twice), so a neighbour is found without a map.
+    let mut order: Vec<usize> = (0..obs.len()).collect();
+    order.sort_by_key(|&i| (obs[i].camera, obs[i].frame));
+    let slots = obs.iter().map(|o| o.corner + 1).max().unwrap_or(0);
+    let mut at = vec![usize::MAX; slots];
+    let mut out = vec![0.0; obs.len()];
+    for view in
+        order.chunk_by(|&a, &b| (obs[a].camera, obs[a].frame) == (obs[b].camera, obs[b].frame))
+    {
+        for &i in view {
+            at[obs[i].corner] = i;
+        }
+        for &i in view {
+            let o = &obs[i];
+            let (mut us, mut vs, mut n) = ([0.0; 4], [0.0; 4], 0);
             for c in board_neighbours(o.corner, &dataset.target) {
-                if let Some(j) = index.get(i, c) {
-                    us.push(residuals[2 * j]);
-                    vs.push(residuals[2 * j + 1]);
+                if let Some(&j) = at.get(c).filter(|&&j| j != usize::MAX) {
+                    us[n] = residuals[2 * j];
+                    vs[n] = residuals[2 * j + 1];
+                    n += 1;
                 }
             }
             let r = &residuals[2 * i..2 * i + 2];
-            if us.is_empty() {
-                return r[0].abs().max(r[1].abs());
-            }
-            (r[0] - median(&mut us))
-                .abs()
-                .max((r[1] - median(&mut vs)).abs())
-        })
-        .collect()
+            out[i] = if n == 0 {
+                r[0].abs().max(r[1].abs())
+            } else {
+                (r[0] - median(&mut us[..n]))
+                    .abs()
+                    .max((r[1] - median(&mut vs[..n])).abs())
+            };
+        }
+        for &i in view {
+            at[obs[i].corner] = usize::MAX;
+        }
+    }
+    out
 }
 
 /// The (up to four) corners next to `corner` on the board: left, right, above and
@@ -287,56 +300,6 @@ fn board_neighbours(
     ]
     .into_iter()
     .flatten()
-}
-
-/// Observation index by (view, corner) in flat arrays: the rejection rounds look
-/// up every corner's neighbours, and hashing 10⁶ keys per round cost more than
-/// the re-solve's own bookkeeping on large datasets.
-struct CornerIndex {
-    /// Each observation's view, numbered densely.
-    view_of: Vec<usize>,
-    /// `slots[view · corners + corner]`: the observation, or `usize::MAX`.
-    slots: Vec<usize>,
-    corners: usize,
-}
-
-impl CornerIndex {
-    fn new(dataset: &Dataset) -> Self {
-        let corners = dataset
-            .observations
-            .iter()
-            .map(|o| o.corner + 1)
-            .max()
-            .unwrap_or(0)
-            .max(dataset.target.num_corners());
-        let mut views: HashMap<(usize, usize), usize> = HashMap::new();
-        let view_of: Vec<usize> = dataset
-            .observations
-            .iter()
-            .map(|o| {
-                let next = views.len();
-                *views.entry((o.camera, o.frame)).or_insert(next)
-            })
-            .collect();
-        let mut slots = vec![usize::MAX; views.len() * corners];
-        for (i, o) in dataset.observations.iter().enumerate() {
-            slots[view_of[i] * corners + o.corner] = i;
-        }
-        CornerIndex {
-            view_of,
-            slots,
-            corners,
-        }
-    }
-
-    /// The observation of `corner` in observation `i`'s view, if there is one.
-    fn get(&self, i: usize, corner: usize) -> Option<usize> {
-        if corner >= self.corners {
-            return None;
-        }
-        let j = self.slots[self.view_of[i] * self.corners + corner];
-        (j != usize::MAX).then_some(j)
-    }
 }
 
 /// Which observations to reject this round: those whose residual stands out from
@@ -496,5 +459,104 @@ pub fn weak_intrinsics_warnings(dataset: &Dataset, state: &State, warnings: &mut
                 100.0 * MIN_PERSPECTIVE
             ));
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::camera::CameraSpec;
+    use crate::model::target::Target;
+    use rand::seq::SliceRandom;
+    use rand::{Rng, SeedableRng};
+
+    /// The map-based computation the dense one replaced, as the reference.
+    fn local_deviations_by_map(dataset: &Dataset, residuals: &[f64]) -> Vec<f64> {
+        let cols = dataset.target.cols;
+        let index: HashMap<(usize, usize, usize), usize> = dataset
+            .observations
+            .iter()
+            .enumerate()
+            .map(|(i, o)| ((o.camera, o.frame, o.corner), i))
+            .collect();
+        let median = |v: &mut Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            let n = v.len();
+            if n % 2 == 1 {
+                v[n / 2]
+            } else {
+                0.5 * (v[n / 2 - 1] + v[n / 2])
+            }
+        };
+        let deviation = |i: usize, o: &Observation| {
+            let (row, col) = (o.corner / cols, o.corner % cols);
+            let mut neighbours = Vec::new();
+            if col > 0 {
+                neighbours.push(o.corner - 1);
+            }
+            if col + 1 < cols {
+                neighbours.push(o.corner + 1);
+            }
+            if row > 0 {
+                neighbours.push(o.corner - cols);
+            }
+            neighbours.push(o.corner + cols);
+            let found: Vec<usize> = neighbours
+                .into_iter()
+                .filter_map(|c| index.get(&(o.camera, o.frame, c)).copied())
+                .collect();
+            let r = &residuals[2 * i..2 * i + 2];
+            if found.is_empty() {
+                return r[0].abs().max(r[1].abs());
+            }
+            let mut us: Vec<f64> = found.iter().map(|&j| residuals[2 * j]).collect();
+            let mut vs: Vec<f64> = found.iter().map(|&j| residuals[2 * j + 1]).collect();
+            (r[0] - median(&mut us))
+                .abs()
+                .max((r[1] - median(&mut vs)).abs())
+        };
+        dataset
+            .observations
+            .iter()
+            .enumerate()
+            .map(|(i, o)| deviation(i, o))
+            .collect()
+    }
+
+    #[test]
+    fn local_deviations_equal_the_map_based_ones() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        let target = Target {
+            rows: 6,
+            cols: 7,
+            spacing: 0.05,
+        };
+        let cameras = vec![
+            CameraSpec::new("a", 640, 480, Default::default()),
+            CameraSpec::new("b", 640, 480, Default::default()),
+        ];
+        // Corners missing, rows in no order, corners observed twice in a view.
+        let mut rows = Vec::new();
+        for camera in 0..2 {
+            for frame in 0..6 {
+                for corner in 0..42 {
+                    if rng.gen_bool(0.8) {
+                        rows.push((camera, frame, corner, [0.0, 0.0]));
+                    }
+                }
+            }
+        }
+        for _ in 0..12 {
+            let dup = rows[rng.gen_range(0..rows.len())];
+            rows.push(dup);
+        }
+        rows.shuffle(&mut rng);
+        let d = Dataset::from_keyed(target, cameras, rows);
+        let residuals: Vec<f64> = (0..2 * d.observations.len())
+            .map(|_| rng.gen_range(-2.0..2.0))
+            .collect();
+        let dense = local_deviations(&d, &residuals);
+        assert_eq!(dense.len(), d.observations.len());
+        assert_eq!(dense, local_deviations_by_map(&d, &residuals));
     }
 }

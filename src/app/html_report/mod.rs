@@ -48,6 +48,22 @@ pub fn write_calibration_report(dir: &Path, c: &Calibration, labels: &FrameLabel
         .iter()
         .map(|cam| read_uncertainty(dir, &cam.name))
         .collect();
+    write_calibration_report_with(dir, c, labels, &maps)
+}
+
+/// Writes `report.html` of a calibration into `dir`, embedding `maps[k]` as camera
+/// k's uncertainty map (the bytes of its file, as [`read_uncertainty`] would read
+/// them once written; one over the embedding limit is left out as there).
+pub fn write_calibration_report_with(
+    dir: &Path,
+    c: &Calibration,
+    labels: &FrameLabels,
+    maps: &[Option<Vec<u8>>],
+) -> Result<()> {
+    let maps: Vec<Option<Vec<u8>>> = maps
+        .iter()
+        .map(|m| m.clone().filter(|b| b.len() as u64 <= MAX_EMBEDDED_BYTES))
+        .collect();
     let html = calibration::calibration_page(c, labels, &maps)?;
     write_atomic(&dir.join(REPORT_FILE), html.as_bytes())
 }
