@@ -45,6 +45,9 @@ fn main() {
         "cpp/camera.h",
         "cpp/solver.cc",
         "cpp/sfm.h",
+        "cpp/pose_refit.h",
+        "cpp/residuals.h",
+        "cpp/priors.h",
     ] {
         println!("cargo:rerun-if-changed={f}");
     }

@@ -23,6 +23,10 @@ struct BundleReport;
 // parameters back into data.  Invalid input throws (a Rust Err), never aborts.
 SolveReport solve(ProblemData& data, const SolveOptions& options);
 
+// The same solve for a pose-only refit (everything but the board poses held, no
+// loss): every frame's pose on its own, without a Ceres problem (pose_refit.h).
+SolveReport refit_poses(ProblemData& data, const SolveOptions& options);
+
 // Residuals (observed minus projected, loss not applied) at the current
 // parameters, and optionally the Jacobian over the free parameters.
 Evaluation evaluate(const ProblemData& data, const SolveOptions& options, bool with_jacobian);

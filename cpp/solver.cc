@@ -22,6 +22,7 @@
 #include <utility>
 #include <vector>
 
+#include "deformcal/cpp/pose_refit.h"
 #include "deformcal/cpp/priors.h"
 #include "deformcal/cpp/residuals.h"
 #include "deformcal/src/solver/bridge.rs.h"
@@ -890,6 +891,100 @@ void DirectJacobian(const Assembled& a, const double* base, size_t num_observati
   out.col_param = f.params;
 }
 
+// The frames of a pose-only refit, each with its views (one per camera that
+// sees it) and the observations behind each view, in the view's order.
+struct FrameViews {
+  std::vector<std::vector<std::unique_ptr<PoseView>>> views;
+  std::vector<std::vector<std::vector<uint32_t>>> observations;
+};
+
+template <class Lens>
+PoseView* MakePoseView(const double* intrinsics, const double* rig) {
+  return new PoseViewOf<Lens>(intrinsics, rig);
+}
+
+// Refuses problem data that are not a pose-only refit without a loss: then
+// frames are no longer independent, and the per-frame solve would be wrong.
+template <class Board>
+void RequirePoseOnly(const ffi::ProblemData& d, const ffi::SolveOptions& o) {
+  if (o.loss != ffi::LossKind::None) Fail("a pose refit is plain least squares (no loss)");
+  const bool held = d.hold_intrinsics && (d.num_cameras == 1 || d.hold_camera_poses) &&
+                    (Board::kCornerSize == 0 || d.hold_corrections) &&
+                    (Board::kFrameExtra == 0 || d.hold_deformations);
+  if (!held) Fail("a pose refit holds everything but the board poses");
+}
+
+// Groups the observations by frame and camera, each board point evaluated
+// once under the held board model.
+template <class Board>
+FrameViews CollectFrames(const ffi::ProblemData& d, Params& p) {
+  FrameViews f;
+  f.views.resize(d.num_frames);
+  f.observations.resize(d.num_frames);
+  std::vector<PoseView* (*)(const double*, const double*)> make;
+  for (size_t k = 0; k < d.num_cameras; ++k) {
+    DispatchLens(std::string(d.lens_models[k]), [&](auto lens) {
+      make.push_back(&MakePoseView<decltype(lens)>);
+    });
+  }
+  // Per frame, the view of camera k (index into its views), -1 when none yet.
+  std::vector<std::vector<int>> slot(d.num_frames, std::vector<int>(d.num_cameras, -1));
+  const size_t n = d.obs_uv.size() / 2;
+  for (size_t i = 0; i < n; ++i) {
+    const uint32_t cam = d.obs_camera[i], frame = d.obs_frame[i], corner = d.obs_corner[i];
+    int& s = slot[frame][cam];
+    if (s < 0) {
+      s = static_cast<int>(f.views[frame].size());
+      f.views[frame].emplace_back(make[cam](p.intrinsics[cam], cam > 0 ? p.camera_poses[cam] : nullptr));
+      f.observations[frame].emplace_back();
+    }
+    double point[3];
+    const double* correction = Board::kCornerSize > 0 ? p.Correction(corner) : nullptr;
+    Board::Point(&d.board[3 * corner], p.Frame(frame) + kPoseSize, correction, point);
+    const double w = d.obs_weight.empty() ? 1.0 : d.obs_weight[i];
+    f.views[frame][s]->Add(d.obs_uv[2 * i], d.obs_uv[2 * i + 1], w, point);
+    f.observations[frame][s].push_back(static_cast<uint32_t>(i));
+  }
+  return f;
+}
+
+// Refits every frame's pose on its own; the report as a joint solve's.
+ffi::SolveReport RefitEachFrame(FrameViews& f, const ffi::ProblemData& d, const ffi::SolveOptions& o,
+                             Params& p) {
+  ffi::SolveReport report;
+  report.usable = true;
+  report.converged = true;
+  report.linear_solver = rust::String("per-frame dense normal equations");
+  std::vector<double> residuals(d.obs_uv.size(), 0.0), r;
+  for (size_t j = 0; j < f.views.size(); ++j) {
+    if (f.views[j].empty()) continue;
+    const PoseRefitResult fit = RefitFramePose(f.views[j], p.Frame(j), o.max_iterations);
+    report.usable = report.usable && fit.ok;
+    report.converged = report.converged && fit.converged;
+    report.iterations = std::max(report.iterations, fit.iterations);
+    report.initial_cost += fit.initial_cost;
+    report.final_cost += fit.final_cost;
+    for (size_t v = 0; v < f.views[j].size() && report.usable; ++v) {
+      const std::vector<uint32_t>& obs = f.observations[j][v];
+      r.assign(2 * obs.size(), 0.0);
+      report.usable = f.views[j][v]->Residuals(p.Frame(j), r.data());
+      for (size_t k = 0; k < obs.size(); ++k) {
+        residuals[2 * obs[k]] = r[2 * k];
+        residuals[2 * obs[k] + 1] = r[2 * k + 1];
+      }
+    }
+    if (!report.usable) {
+      report.message = rust::String("frame " + std::to_string(j) +
+                                    ": a board point has no image under the held intrinsics");
+      return report;
+    }
+  }
+  report.message = rust::String(report.converged ? "every frame converged"
+                                                 : "a frame hit the iteration limit");
+  for (double v : residuals) report.residuals.push_back(v);
+  return report;
+}
+
 }  // namespace
 
 namespace ffi {
@@ -950,6 +1045,24 @@ SolveReport solve(ProblemData& data, const SolveOptions& options) {
   report.seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   if (options.verbose) std::fprintf(stderr, "%s\n", summary.FullReport().c_str());
+  return report;
+}
+
+SolveReport refit_poses(ProblemData& data, const SolveOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  ValidateProblem(data, options);
+  Params params(data);
+  SolveReport report;
+  DispatchBoard(std::string(data.board_model), [&](auto board) {
+    using Board = decltype(board);
+    RequirePoseOnly<Board>(data, options);
+    FrameViews frames = CollectFrames<Board>(data, params);
+    report = RefitEachFrame(frames, data, options, params);
+  });
+  for (double v : params.storage) report.usable = report.usable && std::isfinite(v);
+  if (report.usable) params.CopyTo(data);
+  report.seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return report;
 }
 

@@ -2,9 +2,10 @@
 //! the synthetic presets (quick variants of configs/protocol_*.toml).
 mod common;
 use deformcal::app::config::{Config, ProtocolConfig};
-use deformcal::app::protocol::{draw_subsets, merge, prepare, Setup, Shard, ShardFile};
+use deformcal::app::protocol::{draw_subsets, merge, prepare, test_rmse, Setup, Shard, ShardFile};
 use deformcal::app::protocol_report::{protocol_csv, summarise, Summary};
-use deformcal::solver::problem::{Hold, Problem, SolverSettings};
+use deformcal::model::synthetic::{Generator, Preset};
+use deformcal::solver::problem::{rmse, Hold, Loss, Problem, SolverSettings, State};
 use deformcal::Method;
 use std::path::Path;
 use std::process::Command;
@@ -256,6 +257,124 @@ fn pose_only_refit_evaluates_like_the_general_problem() {
             assert!((a - b).abs() < 1e-9, "{a} vs {b}");
         }
     }
+}
+
+/// Tolerances tight enough that Ceres stops at the optimum to round-off.
+fn converged(settings: &SolverSettings) -> SolverSettings {
+    SolverSettings {
+        function_tolerance: 1e-16,
+        gradient_tolerance: 1e-16,
+        parameter_tolerance: 1e-16,
+        max_iterations: 500,
+        ..settings.clone()
+    }
+}
+
+/// The test error's per-frame refit against the previous path (one Ceres problem
+/// over all 40 reference frames, static corrections held): the same optimum, at
+/// the reference's own intrinsics and at intrinsics far from both.
+#[test]
+fn test_error_refit_frame_by_frame_matches_the_joint_ceres_solve() {
+    let s = setup("t2", 40, 1, &[Method::Standard]);
+    let r = s.reference.as_ref().unwrap();
+    let truth = s.header.truth.as_ref().unwrap()[0];
+    let away = truth
+        .with_param("fx", truth.fx() + 3.0)
+        .with_param("cy", truth.cy() - 2.0)
+        .with_param("k1", truth.get("k1").unwrap() + 0.05);
+    let previous = SolverSettings {
+        per_corner_blocks: true,
+        ..s.settings.clone()
+    };
+    for theta in [r.state.intrinsics[0], truth, away] {
+        let fast = test_rmse(r, 0, &theta, &s.settings).unwrap();
+        let joint = test_rmse(r, 0, &theta, &converged(&previous)).unwrap();
+        let today = test_rmse(r, 0, &theta, &previous).unwrap();
+        assert!((fast - joint).abs() <= 1e-9 * joint, "{fast} vs {joint}");
+        // The previous path at its default tolerances stops a little short.
+        assert!(fast <= today * (1.0 + 1e-12), "{fast} vs {today}");
+        assert!((fast - today).abs() <= 1e-7 * today, "{fast} vs {today}");
+    }
+    // At the truth the refit leaves about the noise (the reference preset's
+    // σ = 0.15 px per axis: √2 σ per corner, less the 6 poses' share and what
+    // the reference's correction misses); intrinsics 3 px away leave clearly more.
+    let noise = Preset::Reference.spec().noise_px * 2f64.sqrt();
+    let at_truth = test_rmse(r, 0, &truth, &s.settings).unwrap();
+    assert!(
+        (at_truth - noise).abs() < 0.1 * noise,
+        "{at_truth} vs {noise}"
+    );
+    let at_away = test_rmse(r, 0, &away, &s.settings).unwrap();
+    assert!(at_away > 1.5 * at_truth, "{at_away} vs {at_truth}");
+}
+
+/// The per-frame refit with a rig, held per-image bends and weighted
+/// observations: the same poses and residuals as the joint Ceres solve; the
+/// held parameters untouched; a problem that is no pose-only refit refused.
+#[test]
+fn per_frame_pose_refit_matches_the_joint_solve_with_a_rig_and_weights() {
+    let gen = Generator::new(Preset::T2, Some(8), 3).with_cameras(2);
+    let (mut data, truth) = gen.generate();
+    for (i, o) in data.observations.iter_mut().enumerate() {
+        if i % 3 == 0 {
+            o.weight = 0.5;
+        }
+    }
+    let mut start = State::rigid(
+        truth.intrinsics.clone(),
+        truth.camera_poses.clone(),
+        truth.frame_poses.clone(),
+        &data.target,
+    );
+    start.deformations = truth.deformations.clone();
+    for (j, p) in start.frame_poses.iter_mut().enumerate() {
+        p.rotation[j % 3] += 0.01;
+        p.translation[(j + 1) % 3] += 0.005;
+    }
+    let problem = Problem {
+        dataset: &data,
+        method: Method::Dynamic,
+        gauge: Vec::new(),
+        frozen: Vec::new(),
+        hold: Hold {
+            intrinsics: true,
+            camera_poses: true,
+            corrections: true,
+            deformations: true,
+        },
+    };
+    let plain = SolverSettings {
+        loss: Loss::None,
+        ..SolverSettings::default()
+    };
+    let (mut joint, mut fast) = (start.clone(), start.clone());
+    let a = problem.solve(&mut joint, &converged(&plain)).unwrap();
+    let b = problem.refit_poses(&mut fast, &plain).unwrap();
+    assert!(b.converged && b.iterations > 0);
+    let (ea, eb) = (rmse(&a.residuals), rmse(&b.residuals));
+    assert!((ea - eb).abs() <= 1e-9 * ea, "{ea} vs {eb}");
+    // Far below the 0.2 px noise: the poses came back from their offsets.
+    assert!(eb < 0.5, "{eb}");
+    for (x, y) in a.residuals.iter().zip(&b.residuals) {
+        assert!((x - y).abs() < 1e-7, "{x} vs {y}");
+    }
+    for (p, q) in joint.frame_poses.iter().zip(&fast.frame_poses) {
+        for i in 0..3 {
+            assert!((p.rotation[i] - q.rotation[i]).abs() < 1e-9);
+            assert!((p.translation[i] - q.translation[i]).abs() < 1e-9);
+        }
+    }
+    assert_eq!(fast.intrinsics, start.intrinsics);
+    assert_eq!(fast.camera_poses, start.camera_poses);
+    assert_eq!(fast.deformations, start.deformations);
+    // With a loss, or the intrinsics free, frames are not independent.
+    let robust = SolverSettings::default();
+    assert!(problem.refit_poses(&mut start.clone(), &robust).is_err());
+    let free = Problem {
+        hold: Hold::default(),
+        ..problem.clone()
+    };
+    assert!(free.refit_poses(&mut start.clone(), &plain).is_err());
 }
 
 /// The whole command line: sharded and merged outputs equal one unsharded run's, file by file.

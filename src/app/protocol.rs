@@ -9,7 +9,7 @@ use crate::model::board::{HigherBend, Method, Paraboloid};
 use crate::model::camera::CameraSpec;
 use crate::model::dataset::Dataset;
 use crate::model::lens::Intrinsics;
-use crate::model::metrics::{mapping_error, mapping_error_rot};
+use crate::model::metrics::{grid_rays, mapping_error_of, mapping_error_rot_of};
 use crate::model::selection::{AutoSettings, Selection};
 use crate::model::state::State;
 use crate::model::synthetic::Truth;
@@ -364,7 +364,13 @@ pub struct Setup {
     pub detector_noise_px: Option<f64>,
     /// `[sfm]`: the scene every calibration reconstructs.
     pub sfm: Option<Experiment>,
+    /// Per camera, the mapping-error grid's rays under the reference and the
+    /// truth: the same for every subset, so unprojected once.
+    grids: Vec<[Option<Rays>; 2]>,
 }
+
+/// A mapping-error grid's pixels and rays ([`grid_rays`]).
+type Rays = Vec<(nalgebra::Vector2<f64>, nalgebra::Vector3<f64>)>;
 
 /// Loads the data, runs the reference calibration and draws the subsets.
 pub fn prepare(config: &Config, protocol: &ProtocolConfig) -> Result<Setup> {
@@ -445,7 +451,20 @@ pub fn prepare(config: &Config, protocol: &ProtocolConfig) -> Result<Setup> {
             reference.as_ref(),
         )?),
     };
+    let grids = header
+        .cameras
+        .iter()
+        .enumerate()
+        .map(|(k, cam)| {
+            let rays = |i: &Intrinsics| grid_rays(i, cam.width, cam.height);
+            [
+                reference.as_ref().map(|r| rays(&r.state.intrinsics[k])),
+                truth.as_ref().map(|t| rays(&t.intrinsics[k])),
+            ]
+        })
+        .collect();
     Ok(Setup {
+        grids,
         header,
         dataset,
         truth,
@@ -522,7 +541,9 @@ fn record_bends(row: &mut Row, c: &Calibration) {
 /// `test_rmse_px` of camera `k`: its views of the reference set refitted with only
 /// the board poses free, the given intrinsics and the reference static correction
 /// held.  The refit is plain least squares: the reference set is clean, and the
-/// RMSE is a least-squares figure.
+/// RMSE is a least-squares figure.  With `settings.per_corner_blocks` it runs on
+/// the previous path (one Ceres problem over all frames), which converges to the
+/// same optimum within its solver tolerances.
 pub fn test_rmse(
     reference: &Calibration,
     k: usize,
@@ -574,9 +595,15 @@ pub fn test_rmse(
             deformations: true,
         },
     };
-    // The solve hands back its final residuals; evaluating them again would
-    // rebuild the 650-view problem for nothing.
-    let report = problem.solve(&mut state, settings)?;
+    // Only the board poses are free and there is no loss: every frame is its own
+    // 6-parameter problem, refitted on its own. The previous path (one Ceres
+    // problem) stays as the reference it is tested against. The solve hands back
+    // its final residuals; evaluating them again would rebuild the problem.
+    let report = if settings.per_corner_blocks {
+        problem.solve(&mut state, settings)?
+    } else {
+        problem.refit_poses(&mut state, settings)?
+    };
     if report.usable && !report.residuals.is_empty() {
         return Ok(rmse(&report.residuals));
     }
@@ -594,18 +621,17 @@ impl Setup {
     ) -> CameraRow {
         let cam = &self.header.cameras[k];
         let theta = c.state.intrinsics[k];
-        let (w, h) = (cam.width, cam.height);
-        let against = |other: Option<&Intrinsics>| {
-            other.map_or((None, None), |o| {
+        let against = |rays: &Option<Rays>| {
+            rays.as_ref().map_or((None, None), |r| {
                 (
-                    finite(mapping_error(o, &theta, w, h)),
-                    finite(mapping_error_rot(o, &theta, w, h)),
+                    finite(mapping_error_of(r, &theta)),
+                    finite(mapping_error_rot_of(r, &theta)),
                 )
             })
         };
-        let (mapping, mapping_rot) =
-            against(self.reference.as_ref().map(|r| &r.state.intrinsics[k]));
-        let (truth, truth_rot) = against(self.truth.as_ref().map(|t| &t.intrinsics[k]));
+        let [reference, truth] = &self.grids[k];
+        let (mapping, mapping_rot) = against(reference);
+        let (truth, truth_rot) = against(truth);
         let test = match &self.reference {
             None => None,
             Some(r) => match test_rmse(r, k, &theta, &self.settings) {

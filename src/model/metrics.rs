@@ -33,28 +33,37 @@ fn rms_after(rays: &[(Vector2<f64>, Vector3<f64>)], b: &Intrinsics, r: &Matrix3<
 
 /// `mapping_error_px`: unproject a 20 px grid with `a`, project with `b`, RMSE in pixels.
 pub fn mapping_error(a: &Intrinsics, b: &Intrinsics, width: u32, height: u32) -> f64 {
-    let rays = grid_rays(a, width, height);
+    mapping_error_of(&grid_rays(a, width, height), b)
+}
+
+/// [`mapping_error`] from `a`'s [`grid_rays`], computed once where one `a` is
+/// compared with many `b` (the protocol's reference and truth).
+pub fn mapping_error_of(rays: &[(Vector2<f64>, Vector3<f64>)], b: &Intrinsics) -> f64 {
     if rays.is_empty() {
         return f64::NAN;
     }
-    rms_after(&rays, b, &Matrix3::identity())
+    rms_after(rays, b, &Matrix3::identity())
 }
 
 /// `mapping_error_rot_px`: the mapping error after the best virtual camera rotation
 /// (Gauss-Newton over 3 rotation parameters).
 pub fn mapping_error_rot(a: &Intrinsics, b: &Intrinsics, width: u32, height: u32) -> f64 {
-    let rays = grid_rays(a, width, height);
+    mapping_error_rot_of(&grid_rays(a, width, height), b)
+}
+
+/// [`mapping_error_rot`] from `a`'s [`grid_rays`].
+pub fn mapping_error_rot_of(rays: &[(Vector2<f64>, Vector3<f64>)], b: &Intrinsics) -> f64 {
     if rays.is_empty() {
         return f64::NAN;
     }
     let mut rot = Rotation3::identity();
-    let mut best = rms_after(&rays, b, rot.matrix());
+    let mut best = rms_after(rays, b, rot.matrix());
     for _ in 0..20 {
         // Normal equations of the residual q(R·δR·ray) − px in the increment δ.
         let mut jtj = Matrix3::<f64>::zeros();
         let mut jtr = Vector3::<f64>::zeros();
         let h = 1e-7;
-        for (px, ray) in &rays {
+        for (px, ray) in rays {
             let base = rot * ray;
             let Some(q0) = b.project(&base) else {
                 return best;
@@ -76,7 +85,7 @@ pub fn mapping_error_rot(a: &Intrinsics, b: &Intrinsics, width: u32, height: u32
             break;
         };
         let candidate = rot * Rotation3::from_scaled_axis(step);
-        let e = rms_after(&rays, b, candidate.matrix());
+        let e = rms_after(rays, b, candidate.matrix());
         if e >= best {
             break;
         }

@@ -160,6 +160,10 @@ pub mod ffi {
         /// Solves the problem in place.
         fn solve(data: &mut ProblemData, options: &SolveOptions) -> Result<SolveReport>;
 
+        /// Solves a pose-only refit (everything but the board poses held, no
+        /// loss) frame by frame, in place (`cpp/pose_refit.h`).
+        fn refit_poses(data: &mut ProblemData, options: &SolveOptions) -> Result<SolveReport>;
+
         /// Evaluates residuals and optionally the Jacobian.
         fn evaluate(
             data: &ProblemData,

@@ -507,8 +507,9 @@ fn sandwich(e: &Evaluation, weights: &[f64], x: &[f64], t: usize) -> DMatrix<f64
         y.iter_mut().for_each(|v| *v = 0.0);
         for i in e.jacobian_row_ptr[r] as usize..e.jacobian_row_ptr[r + 1] as usize {
             let (col, v) = (e.jacobian_col_idx[i] as usize, e.jacobian_values[i]);
-            for u in 0..t {
-                y[u] += v * x[col * t + u];
+            // Over slices, so that it vectorises; each y[u] sums in the same order.
+            for (yu, xu) in y.iter_mut().zip(&x[col * t..(col + 1) * t]) {
+                *yu += v * xu;
             }
         }
         let w = weights[r / 2];
@@ -589,8 +590,9 @@ pub fn unit_correction_std(
         y.iter_mut().for_each(|v| *v = 0.0);
         for i in e.jacobian_row_ptr[r] as usize..e.jacobian_row_ptr[r + 1] as usize {
             let (col, v) = (e.jacobian_col_idx[i] as usize, e.jacobian_values[i]);
-            for (u, yu) in y.iter_mut().enumerate() {
-                *yu += v * x[col * t + u];
+            // Over slices, so that it vectorises; each y[u] sums in the same order.
+            for (yu, xu) in y.iter_mut().zip(&x[col * t..(col + 1) * t]) {
+                *yu += v * xu;
             }
         }
         let w2 = weights[r / 2] * weights[r / 2];

@@ -368,6 +368,26 @@ impl Problem<'_> {
         Ok(report)
     }
 
+    /// The same as [`Problem::solve`] for a pose-only refit (everything but the
+    /// board poses held, no loss, as the protocol's test error): each frame's pose
+    /// solved on its own to round-off, without a Ceres problem; several times faster.
+    /// Other problems are refused.
+    pub fn refit_poses(&self, state: &mut State, settings: &SolverSettings) -> Result<SolveReport> {
+        let layout = self.layout();
+        let mut data = self.data(state, &layout, settings)?;
+        let mut report = ffi::refit_poses(&mut data, &settings.options())
+            .map_err(|e| Error::Problem(e.what().to_string()))?;
+        if !report.usable {
+            return Err(Error::Solver(format!(
+                "the pose refit failed: {}",
+                report.message
+            )));
+        }
+        self.unweight(&mut report.residuals);
+        layout.unpack(&data.params, state);
+        Ok(report)
+    }
+
     /// Residuals in pixels (observed − projected, per observation u then v, weights
     /// undone) and optionally the Jacobian of the weighted residuals.
     pub fn evaluate(
