@@ -2,7 +2,6 @@
 // Everything is templated on the scalar so Ceres' Jets flow through unchanged.
 #pragma once
 
-#include <ceres/jet.h>
 #include <ceres/rotation.h>
 
 #include <algorithm>
@@ -27,9 +26,11 @@ inline void TransformPoint(const T* pose, const T* x, T* x_out) {
 
 // Lens models (SPEC 1).  Each is one struct: its config name, its parameter
 // count and one templated projection from a camera-frame point to a pixel, used
-// by every residual.  The Rust registry (src/model/lens.rs) describes the same
-// models and a test checks that both projections agree.  Project returns false
-// where the model has no valid image of the point.
+// by every residual, with its Jacobian in closed form for the chained residuals
+// (ProjectWithJacobian, below the models).  The Rust registry
+// (src/model/lens.rs) describes the same models and a test checks that both
+// projections agree.  Project returns false where the model has no valid image
+// of the point.
 
 // The paper's radial3 model: OpenCV's with p1 = p2 = 0.
 struct Radial3 {
@@ -143,28 +144,15 @@ struct DoubleSphere {
   static bool ProjectWithJacobian(const double* p, const double* xc, double* uv, double* J);
 };
 
-// The projection's pixel and its Jacobian J (2 rows of kNumParams + 3: over the
-// lens parameters, then the camera point), from Jets over both: for a model
-// without a closed form.  Every model's ProjectWithJacobian (closed form below)
-// is checked against the single-piece autodiff reference by the residuals'
-// tests (tests/lens_models.rs, tests/engine.rs).
-template <class Lens>
-bool JetProjectWithJacobian(const double* p, const double* xc, double* uv, double* J) {
-  constexpr int kLens = Lens::kNumParams;
-  using JP = ceres::Jet<double, kLens + 3>;
-  JP ij[kLens], pc[3], out[2];
-  for (int k = 0; k < kLens; ++k) ij[k] = JP(p[k], k);
-  for (int k = 0; k < 3; ++k) pc[k] = JP(xc[k], kLens + k);
-  if (!Lens::Project(ij, pc, out)) return false;
-  for (int a = 0; a < 2; ++a) {
-    uv[a] = out[a].a;
-    for (int k = 0; k < kLens + 3; ++k) J[a * (kLens + 3) + k] = out[a].v[k];
-  }
-  return true;
-}
+// ProjectWithJacobian: the projection's pixel and its Jacobian J (2 rows of
+// kNumParams + 3: over the lens parameters, then the camera point), in closed
+// form, which autodiff Jets over up to 15 derivatives (through atan2 and sqrt
+// for the fisheyes) cost up to twice as much per iteration.  The pixel is
+// Project's, bit for bit; the residuals' tests (tests/lens_models.rs,
+// tests/engine.rs) check every model's Jacobian against the single-piece
+// autodiff reference.
 
-// The OpenCV family's Jacobian in closed form: Jets over 10 to 15 derivatives
-// cost the rational model twice radial3's time per iteration.  kTangential and
+// The OpenCV family's ProjectWithJacobian.  kTangential and
 // kRational select p1 p2 (at 6, 7; k3 then at 8) and k4 k5 k6 (at 9, 10, 11);
 // without p1 p2, k3 is at 6.  The pixel itself is Lens::Project's, bit for bit.
 template <class Lens, bool kTangential, bool kRational>
@@ -242,9 +230,8 @@ inline bool OpenCv8::ProjectWithJacobian(const double* p, const double* xc, doub
                                          double* J) {
   return OpenCvProjectWithJacobian<OpenCv8, true, true>(p, xc, uv, J);
 }
-// Kannala-Brandt in closed form (Jets through atan2 and sqrt cost it twice the
-// OpenCV models' time per corner).  theta = atan2(r, z), theta_d its polynomial,
-// (xd, yd) = (x, y) theta_d / r.
+// Kannala-Brandt's ProjectWithJacobian: theta = atan2(r, z), theta_d its
+// polynomial, (xd, yd) = (x, y) theta_d / r.
 inline bool Kb4::ProjectWithJacobian(const double* p, const double* xc, double* uv, double* J) {
   constexpr int n = kNumParams + 3;
   Project(p, xc, uv);
@@ -271,7 +258,8 @@ inline bool Kb4::ProjectWithJacobian(const double* p, const double* xc, double* 
   const double poly = 1.0 + t2 * (p[4] + t2 * (p[5] + t2 * (p[6] + t2 * p[7])));
   const double theta_d = theta * poly;
   // d theta_d / d theta.
-  const double g = 1.0 + t2 * (3.0 * p[4] + t2 * (5.0 * p[5] + t2 * (7.0 * p[6] + t2 * 9.0 * p[7])));
+  const double g =
+      1.0 + t2 * (3.0 * p[4] + t2 * (5.0 * p[5] + t2 * (7.0 * p[6] + t2 * 9.0 * p[7])));
   const double ir = 1.0 / r;
   const double s = theta_d * ir;
   Ju[0] = x * s;
@@ -294,7 +282,7 @@ inline bool Kb4::ProjectWithJacobian(const double* p, const double* xc, double* 
   return true;
 }
 
-// Double sphere in closed form: m = alpha d2 + (1 - alpha) zz, (u, v) = f (x, y) / m + c.
+// Double sphere's ProjectWithJacobian: m = alpha d2 + (1 - alpha) zz, (u, v) = f (x, y) / m + c.
 inline bool DoubleSphere::ProjectWithJacobian(const double* p, const double* xc, double* uv,
                                               double* J) {
   constexpr int n = kNumParams + 3;
@@ -313,8 +301,8 @@ inline bool DoubleSphere::ProjectWithJacobian(const double* p, const double* xc,
   const double dm_dzz = alpha * zz / d2 + 1.0 - alpha;
   const double dm_dxi = dm_dzz * d1;
   const double dm_dalpha = d2 - zz;
-  const double dm[3] = {alpha * x / d2 + dm_dzz * xi * x / d1, alpha * y / d2 + dm_dzz * xi * y / d1,
-                        dm_dzz * (xi * z / d1 + 1.0)};
+  const double dm[3] = {alpha * x / d2 + dm_dzz * xi * x / d1,
+                        alpha * y / d2 + dm_dzz * xi * y / d1, dm_dzz * (xi * z / d1 + 1.0)};
   const double gu = -fx * x * im * im, gv = -fy * y * im * im;  // d u / d m, d v / d m
   Ju[0] = x * im;
   Ju[2] = 1.0;

@@ -102,10 +102,10 @@ class ReprojectionError {
 // The same residual with its Jacobian assembled by the chain rule from three
 // pieces: the board point (Jets over the model's own parameters), the rigid
 // transform (closed form; d/dX is the rotation matrix), and the projection
-// (Lens::ProjectWithJacobian: closed form or Jets over intrinsics and the camera
-// point).  The Jets carry 3 to 10 derivatives
-// instead of up to 21, which makes the Jacobian several times cheaper;
-// ReprojectionError stays as the reference it is tested against.
+// (closed form over intrinsics and the camera point, Lens::ProjectWithJacobian).
+// The Jets carry at most the board model's few derivatives instead of up to 21,
+// which makes the Jacobian several times cheaper; ReprojectionError stays as the
+// reference it is tested against.
 template <class Lens, class Board, bool kRig>
 class ChainedReprojection final : public ceres::CostFunction {
  public:
