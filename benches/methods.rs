@@ -162,7 +162,7 @@ fn main() {
                 stages(&c),
                 against(&baseline, &key, &c)
             );
-            saved.insert(key, c.state.intrinsics[0].clone());
+            saved.insert(key, c.state.intrinsics[0]);
         }
     }
     if let Ok(f) = std::env::var("METHODS_SAVE") {
