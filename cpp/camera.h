@@ -4,6 +4,7 @@
 
 #include <ceres/rotation.h>
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 
@@ -25,9 +26,11 @@ inline void TransformPoint(const T* pose, const T* x, T* x_out) {
 
 // Lens models (SPEC 1).  Each is one struct: its config name, its parameter
 // count and one templated projection from a camera-frame point to a pixel, used
-// by every residual.  The Rust registry (src/model/lens.rs) describes the same
-// models and a test checks that both projections agree.  Project returns false
-// where the model has no valid image of the point.
+// by every residual, with its Jacobian in closed form for the chained residuals
+// (ProjectWithJacobian, below the models).  The Rust registry
+// (src/model/lens.rs) describes the same models and a test checks that both
+// projections agree.  Project returns false where the model has no valid image
+// of the point.
 
 // The paper's radial3 model: OpenCV's with p1 = p2 = 0.
 struct Radial3 {
@@ -43,6 +46,7 @@ struct Radial3 {
     uv[1] = p[1] * yn * d + p[3];
     return true;
   }
+  static bool ProjectWithJacobian(const double* p, const double* xc, double* uv, double* J);
 };
 
 // OpenCV's tangential terms (p1 = p[6], p2 = p[7]) on top of a radial factor d.
@@ -70,6 +74,7 @@ struct OpenCv5 {
     OpenCvDistort(p, d, xn, yn, r2, uv);
     return true;
   }
+  static bool ProjectWithJacobian(const double* p, const double* xc, double* uv, double* J);
 };
 
 // OpenCV's rational model (CALIB_RATIONAL_MODEL, ROS rational_polynomial).
@@ -86,6 +91,7 @@ struct OpenCv8 {
     OpenCvDistort(p, num / den, xn, yn, r2, uv);
     return true;
   }
+  static bool ProjectWithJacobian(const double* p, const double* xc, double* uv, double* J);
 };
 
 // Kannala-Brandt equidistant fisheye (OpenCV fisheye, Kalibr pinhole-equi).
@@ -115,6 +121,7 @@ struct Kb4 {
     uv[1] = p[1] * yd + p[3];
     return true;
   }
+  static bool ProjectWithJacobian(const double* p, const double* xc, double* uv, double* J);
 };
 
 // Double sphere (Usenko, Demmel, Cremers 2018); fields of view beyond 180 degrees.
@@ -134,7 +141,183 @@ struct DoubleSphere {
     uv[1] = p[1] * xc[1] / m + p[3];
     return true;
   }
+  static bool ProjectWithJacobian(const double* p, const double* xc, double* uv, double* J);
 };
+
+// ProjectWithJacobian: the projection's pixel and its Jacobian J (2 rows of
+// kNumParams + 3: over the lens parameters, then the camera point), in closed
+// form, which autodiff Jets over up to 15 derivatives (through atan2 and sqrt
+// for the fisheyes) cost up to twice as much per iteration.  The pixel is
+// Project's, bit for bit; the residuals' tests (tests/lens_models.rs,
+// tests/engine.rs) check every model's Jacobian against the single-piece
+// autodiff reference.
+
+// The OpenCV family's ProjectWithJacobian.  kTangential and
+// kRational select p1 p2 (at 6, 7; k3 then at 8) and k4 k5 k6 (at 9, 10, 11);
+// without p1 p2, k3 is at 6.  The pixel itself is Lens::Project's, bit for bit.
+template <class Lens, bool kTangential, bool kRational>
+bool OpenCvProjectWithJacobian(const double* p, const double* xc, double* uv, double* J) {
+  constexpr int n = Lens::kNumParams + 3;
+  Lens::Project(p, xc, uv);
+  const double iz = 1.0 / xc[2];
+  const double xn = xc[0] * iz, yn = xc[1] * iz;
+  const double r2 = xn * xn + yn * yn, r4 = r2 * r2, r6 = r4 * r2;
+  const double k1 = p[4], k2 = p[5], k3 = kTangential ? p[8] : p[6];
+  const double p1 = kTangential ? p[6] : 0.0, p2 = kTangential ? p[7] : 0.0;
+  const double num = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
+  const double dnum = k1 + r2 * (2.0 * k2 + 3.0 * r2 * k3);  // d num / d r2
+  double den = 1.0, dden = 0.0;
+  if (kRational) {
+    den = 1.0 + r2 * (p[9] + r2 * (p[10] + r2 * p[11]));
+    dden = p[9] + r2 * (2.0 * p[10] + 3.0 * r2 * p[11]);
+  }
+  const double iden = 1.0 / den;
+  const double d = num * iden;
+  const double dd = (dnum - d * dden) * iden;  // d d / d r2
+  const double xd = xn * d + 2.0 * p1 * xn * yn + p2 * (r2 + 2.0 * xn * xn);
+  const double yd = yn * d + p1 * (r2 + 2.0 * yn * yn) + 2.0 * p2 * xn * yn;
+  const double fx = p[0], fy = p[1];
+  double* Ju = J;
+  double* Jv = J + n;
+  std::fill(J, J + 2 * n, 0.0);
+  Ju[0] = xd;
+  Ju[2] = 1.0;
+  Jv[1] = yd;
+  Jv[3] = 1.0;
+  // The radial coefficients: d d / d k = r2^i / den (numerator), -d r2^i / den.
+  const double powers[3] = {r2, r4, r6};
+  const int num_at[3] = {4, 5, kTangential ? 8 : 6};
+  for (int i = 0; i < 3; ++i) {
+    const double g = powers[i] * iden;
+    Ju[num_at[i]] = fx * xn * g;
+    Jv[num_at[i]] = fy * yn * g;
+    if (kRational) {
+      Ju[9 + i] = -fx * xn * d * g;
+      Jv[9 + i] = -fy * yn * d * g;
+    }
+  }
+  if (kTangential) {
+    Ju[6] = fx * 2.0 * xn * yn;
+    Ju[7] = fx * (r2 + 2.0 * xn * xn);
+    Jv[6] = fy * (r2 + 2.0 * yn * yn);
+    Jv[7] = fy * 2.0 * xn * yn;
+  }
+  // d(xd, yd) / d(xn, yn), then through xn = x / z, yn = y / z.
+  const double a = 2.0 * dd;
+  const double dxx = d + a * xn * xn + 2.0 * p1 * yn + 6.0 * p2 * xn;
+  const double dxy = a * xn * yn + 2.0 * p1 * xn + 2.0 * p2 * yn;
+  const double dyx = a * xn * yn + 2.0 * p1 * xn + 2.0 * p2 * yn;
+  const double dyy = d + a * yn * yn + 6.0 * p1 * yn + 2.0 * p2 * xn;
+  const int c = Lens::kNumParams;
+  Ju[c] = fx * dxx * iz;
+  Ju[c + 1] = fx * dxy * iz;
+  Ju[c + 2] = -fx * (dxx * xn + dxy * yn) * iz;
+  Jv[c] = fy * dyx * iz;
+  Jv[c + 1] = fy * dyy * iz;
+  Jv[c + 2] = -fy * (dyx * xn + dyy * yn) * iz;
+  return true;
+}
+
+inline bool Radial3::ProjectWithJacobian(const double* p, const double* xc, double* uv,
+                                         double* J) {
+  return OpenCvProjectWithJacobian<Radial3, false, false>(p, xc, uv, J);
+}
+inline bool OpenCv5::ProjectWithJacobian(const double* p, const double* xc, double* uv,
+                                         double* J) {
+  return OpenCvProjectWithJacobian<OpenCv5, true, false>(p, xc, uv, J);
+}
+inline bool OpenCv8::ProjectWithJacobian(const double* p, const double* xc, double* uv,
+                                         double* J) {
+  return OpenCvProjectWithJacobian<OpenCv8, true, true>(p, xc, uv, J);
+}
+// Kannala-Brandt's ProjectWithJacobian: theta = atan2(r, z), theta_d its
+// polynomial, (xd, yd) = (x, y) theta_d / r.
+inline bool Kb4::ProjectWithJacobian(const double* p, const double* xc, double* uv, double* J) {
+  constexpr int n = kNumParams + 3;
+  Project(p, xc, uv);
+  std::fill(J, J + 2 * n, 0.0);
+  double* Ju = J;
+  double* Jv = J + n;
+  const double x = xc[0], y = xc[1], z = xc[2];
+  const double fx = p[0], fy = p[1];
+  const double r2 = x * x + y * y;
+  Ju[2] = 1.0;
+  Jv[3] = 1.0;
+  if (r2 < 1e-30 * z * z) {  // Project's axis branch: (xd, yd) = (x, y) / z
+    Ju[0] = x / z;
+    Jv[1] = y / z;
+    Ju[8] = fx / z;
+    Ju[10] = -fx * x / (z * z);
+    Jv[9] = fy / z;
+    Jv[10] = -fy * y / (z * z);
+    return true;
+  }
+  const double r = std::sqrt(r2);
+  const double theta = std::atan2(r, z);
+  const double t2 = theta * theta;
+  const double poly = 1.0 + t2 * (p[4] + t2 * (p[5] + t2 * (p[6] + t2 * p[7])));
+  const double theta_d = theta * poly;
+  // d theta_d / d theta.
+  const double g =
+      1.0 + t2 * (3.0 * p[4] + t2 * (5.0 * p[5] + t2 * (7.0 * p[6] + t2 * 9.0 * p[7])));
+  const double ir = 1.0 / r;
+  const double s = theta_d * ir;
+  Ju[0] = x * s;
+  Jv[1] = y * s;
+  double tp = theta * t2;  // theta^3, ^5, ^7, ^9
+  for (int i = 0; i < 4; ++i) {
+    Ju[4 + i] = fx * x * tp * ir;
+    Jv[4 + i] = fy * y * tp * ir;
+    tp *= t2;
+  }
+  // d theta / d(x, y, z) with rho2 = r2 + z2; ds = g dtheta / r - theta_d dr / r2.
+  const double irho2 = 1.0 / (r2 + z * z);
+  const double dth_dr = z * irho2;  // d theta / d r
+  const double ds_dr = (g * dth_dr - s) * ir;
+  const double ds[3] = {ds_dr * x * ir, ds_dr * y * ir, -g * r * irho2 * ir};
+  for (int c = 0; c < 3; ++c) {
+    Ju[kNumParams + c] = fx * (x * ds[c] + (c == 0 ? s : 0.0));
+    Jv[kNumParams + c] = fy * (y * ds[c] + (c == 1 ? s : 0.0));
+  }
+  return true;
+}
+
+// Double sphere's ProjectWithJacobian: m = alpha d2 + (1 - alpha) zz, (u, v) = f (x, y) / m + c.
+inline bool DoubleSphere::ProjectWithJacobian(const double* p, const double* xc, double* uv,
+                                              double* J) {
+  constexpr int n = kNumParams + 3;
+  Project(p, xc, uv);
+  std::fill(J, J + 2 * n, 0.0);
+  double* Ju = J;
+  double* Jv = J + n;
+  const double x = xc[0], y = xc[1], z = xc[2];
+  const double fx = p[0], fy = p[1], xi = p[4], alpha = p[5];
+  const double d1 = std::sqrt(x * x + y * y + z * z);
+  const double zz = xi * d1 + z;
+  const double d2 = std::sqrt(x * x + y * y + zz * zz);
+  const double m = alpha * d2 + (1.0 - alpha) * zz;
+  const double im = 1.0 / m;
+  // dm/dzz, and dm/d(x, y, z) through d2 and zz = xi d1 + z.
+  const double dm_dzz = alpha * zz / d2 + 1.0 - alpha;
+  const double dm_dxi = dm_dzz * d1;
+  const double dm_dalpha = d2 - zz;
+  const double dm[3] = {alpha * x / d2 + dm_dzz * xi * x / d1,
+                        alpha * y / d2 + dm_dzz * xi * y / d1, dm_dzz * (xi * z / d1 + 1.0)};
+  const double gu = -fx * x * im * im, gv = -fy * y * im * im;  // d u / d m, d v / d m
+  Ju[0] = x * im;
+  Ju[2] = 1.0;
+  Jv[1] = y * im;
+  Jv[3] = 1.0;
+  Ju[4] = gu * dm_dxi;
+  Jv[4] = gv * dm_dxi;
+  Ju[5] = gu * dm_dalpha;
+  Jv[5] = gv * dm_dalpha;
+  for (int c = 0; c < 3; ++c) {
+    Ju[kNumParams + c] = gu * dm[c] + (c == 0 ? fx * im : 0.0);
+    Jv[kNumParams + c] = gv * dm[c] + (c == 1 ? fy * im : 0.0);
+  }
+  return true;
+}
 
 // The lens registry: every model once.  DispatchLens calls f with a
 // default-constructed model struct whose kName matches, or returns false.

@@ -101,10 +101,11 @@ class ReprojectionError {
 
 // The same residual with its Jacobian assembled by the chain rule from three
 // pieces: the board point (Jets over the model's own parameters), the rigid
-// transform (closed form; d/dX is the rotation matrix), and the projection (Jets
-// over intrinsics and the camera point).  The Jets carry 3 to 10 derivatives
-// instead of up to 21, which makes the Jacobian several times cheaper;
-// ReprojectionError stays as the reference it is tested against.
+// transform (closed form; d/dX is the rotation matrix), and the projection
+// (closed form over intrinsics and the camera point, Lens::ProjectWithJacobian).
+// The Jets carry at most the board model's few derivatives instead of up to 21,
+// which makes the Jacobian several times cheaper; ReprojectionError stays as the
+// reference it is tested against.
 template <class Lens, class Board, bool kRig>
 class ChainedReprojection final : public ceres::CostFunction {
  public:
@@ -177,20 +178,17 @@ class ChainedReprojection final : public ceres::CostFunction {
       }
     }
 
-    // Projection: Jets over intrinsics and the camera point.
+    // Projection and its Jacobian over intrinsics and the camera point.
     constexpr int kLens = Lens::kNumParams;
-    using JP = ceres::Jet<double, kLens + 3>;
-    JP ij[kLens], pc[3], uv[2];
-    for (int i = 0; i < kLens; ++i) ij[i] = JP(intrinsics[i], i);
-    for (int i = 0; i < 3; ++i) pc[i] = JP(cam[i], kLens + i);
-    if (!Lens::Project(ij, pc, uv)) return false;
-    r[0] = w_ * (u_ - uv[0].a);
-    r[1] = w_ * (v_ - uv[1].a);
+    double uv[2], duv[2][kLens + 3];
+    if (!Lens::ProjectWithJacobian(intrinsics, cam, uv, &duv[0][0])) return false;
+    r[0] = w_ * (u_ - uv[0]);
+    r[1] = w_ * (v_ - uv[1]);
 
     // dr/dcam (2x3) and dr/dxc = dr/dcam * dcam/dxc.
     double dr_dcam[2][3], dr_dxc[2][3];
     for (int k = 0; k < 2; ++k) {
-      for (int c = 0; c < 3; ++c) dr_dcam[k][c] = -w_ * uv[k].v[kLens + c];
+      for (int c = 0; c < 3; ++c) dr_dcam[k][c] = -w_ * duv[k][kLens + c];
       for (int c = 0; c < 3; ++c) {
         dr_dxc[k][c] = dr_dcam[k][0] * dcam_dxc[c] + dr_dcam[k][1] * dcam_dxc[3 + c] +
                        dr_dcam[k][2] * dcam_dxc[6 + c];
@@ -199,7 +197,7 @@ class ChainedReprojection final : public ceres::CostFunction {
     int b = 0;
     if (double* J = jacobians[b++]) {
       for (int k = 0; k < 2; ++k)
-        for (int i = 0; i < kLens; ++i) J[k * kLens + i] = -w_ * uv[k].v[i];
+        for (int i = 0; i < kLens; ++i) J[k * kLens + i] = -w_ * duv[k][i];
     }
     if (kRig) {
       if (double* J = jacobians[b]) {
@@ -354,12 +352,9 @@ class ViewReprojection final : public ViewBlock {
         continue;
       }
       constexpr int kLens = Lens::kNumParams;
-      using JP = ceres::Jet<double, kLens + 3>;
-      JP ij[kLens], pc[3], uv[2];
-      for (int k = 0; k < kLens; ++k) ij[k] = JP(intrinsics[k], k);
-      for (int k = 0; k < 3; ++k) pc[k] = JP(cam[k], kLens + k);
-      if (!Lens::Project(ij, pc, uv)) return false;
-      const double e[2] = {o.w * (o.u - uv[0].a), o.w * (o.v - uv[1].a)};
+      double uv[2], duv[2][kLens + 3];
+      if (!Lens::ProjectWithJacobian(intrinsics, cam, uv, &duv[0][0])) return false;
+      const double e[2] = {o.w * (o.u - uv[0]), o.w * (o.v - uv[1])};
       const double s = e[0] * e[0] + e[1] * e[1];
       double f, mt, mr;
       loss.Scale(s, &f, &mt, &mr);
@@ -375,7 +370,7 @@ class ViewReprojection final : public ViewBlock {
       double dcam[2][3];
       for (int a = 0; a < 2; ++a) {
         for (int k = 0; k < kLens + 3; ++k) {
-          const double d = -o.w * (M[a][0] * uv[0].v[k] + M[a][1] * uv[1].v[k]);
+          const double d = -o.w * (M[a][0] * duv[0][k] + M[a][1] * duv[1][k]);
           if (k < kLens) {
             if (Ji) Ji[(2 * i + a) * kLens + k] = d;
           } else {
