@@ -230,14 +230,22 @@ inline bool OpenCv8::ProjectWithJacobian(const double* p, const double* xc, doub
                                          double* J) {
   return OpenCvProjectWithJacobian<OpenCv8, true, true>(p, xc, uv, J);
 }
+// The start of a closed-form ProjectWithJacobian whose Jacobian is mostly zeros:
+// the pixel (Lens::Project's, bit for bit) and J zeroed; returns the row of v
+// (the row of u is J itself).
+template <class Lens>
+double* StartJacobian(const double* p, const double* xc, double* uv, double* J) {
+  constexpr int n = Lens::kNumParams + 3;
+  Lens::Project(p, xc, uv);
+  std::fill(J, J + 2 * n, 0.0);
+  return J + n;
+}
+
 // Kannala-Brandt's ProjectWithJacobian: theta = atan2(r, z), theta_d its
 // polynomial, (xd, yd) = (x, y) theta_d / r.
 inline bool Kb4::ProjectWithJacobian(const double* p, const double* xc, double* uv, double* J) {
-  constexpr int n = kNumParams + 3;
-  Project(p, xc, uv);
-  std::fill(J, J + 2 * n, 0.0);
   double* Ju = J;
-  double* Jv = J + n;
+  double* Jv = StartJacobian<Kb4>(p, xc, uv, J);
   const double x = xc[0], y = xc[1], z = xc[2];
   const double fx = p[0], fy = p[1];
   const double r2 = x * x + y * y;
@@ -285,11 +293,8 @@ inline bool Kb4::ProjectWithJacobian(const double* p, const double* xc, double* 
 // Double sphere's ProjectWithJacobian: m = alpha d2 + (1 - alpha) zz, (u, v) = f (x, y) / m + c.
 inline bool DoubleSphere::ProjectWithJacobian(const double* p, const double* xc, double* uv,
                                               double* J) {
-  constexpr int n = kNumParams + 3;
-  Project(p, xc, uv);
-  std::fill(J, J + 2 * n, 0.0);
   double* Ju = J;
-  double* Jv = J + n;
+  double* Jv = StartJacobian<DoubleSphere>(p, xc, uv, J);
   const double x = xc[0], y = xc[1], z = xc[2];
   const double fx = p[0], fy = p[1], xi = p[4], alpha = p[5];
   const double d1 = std::sqrt(x * x + y * y + z * z);

@@ -229,6 +229,17 @@ fn robust_sigma(residuals: &[f64]) -> f64 {
     1.4826 * *m
 }
 
+/// The median of `v` (sorted in place), the mean of the middle two for an even count.
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
 /// How far each observation's residual stands out from its neighbours' on the
 /// board: the residual minus the component-wise median of the residuals of its
 /// (up to four) adjacent corners in the same view, larger coordinate. A model
@@ -236,15 +247,6 @@ fn robust_sigma(residuals: &[f64]) -> f64 {
 /// here; a bad detection does not. Without a neighbour, the residual itself.
 fn local_deviations(dataset: &Dataset, residuals: &[f64]) -> Vec<f64> {
     let obs = &dataset.observations;
-    let median = |v: &mut [f64]| {
-        v.sort_by(f64::total_cmp);
-        let n = v.len();
-        if n % 2 == 1 {
-            v[n / 2]
-        } else {
-            0.5 * (v[n / 2 - 1] + v[n / 2])
-        }
-    };
     // One view at a time, its corners in a dense slot per board corner (the last
     // observation of a corner seen twice), so a neighbour is found without a map.
     let mut order: Vec<usize> = (0..obs.len()).collect();
@@ -479,15 +481,6 @@ mod tests {
             .enumerate()
             .map(|(i, o)| ((o.camera, o.frame, o.corner), i))
             .collect();
-        let median = |v: &mut Vec<f64>| {
-            v.sort_by(f64::total_cmp);
-            let n = v.len();
-            if n % 2 == 1 {
-                v[n / 2]
-            } else {
-                0.5 * (v[n / 2 - 1] + v[n / 2])
-            }
-        };
         let deviation = |i: usize, o: &Observation| {
             let (row, col) = (o.corner / cols, o.corner % cols);
             let mut neighbours = Vec::new();
