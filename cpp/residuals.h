@@ -288,8 +288,8 @@ class ViewReprojection final : public ViewBlock {
   static constexpr int kFrameSize = kPoseSize + Board::kFrameExtra;
   static constexpr int kModel = Board::kFrameExtra + Board::kCornerSize;
 
-  ViewReprojection(CauchyFold loss, std::shared_ptr<const bool> apply_loss)
-      : loss_(loss), apply_loss_(std::move(apply_loss)) {}
+  ViewReprojection(CauchyFold loss, std::shared_ptr<const double> loss_scale_factor)
+      : loss_(loss), loss_scale_factor_(std::move(loss_scale_factor)) {}
 
   void Add(double u, double v, double w, const double* x) override {
     obs_.push_back({u, v, w, {x[0], x[1], x[2]}});
@@ -309,7 +309,8 @@ class ViewReprojection final : public ViewBlock {
     const double* rig = kRig ? p[1] : nullptr;
     const int fb = kRig ? 2 : 1;
     const double* frame = p[fb];
-    const CauchyFold loss = *apply_loss_ ? loss_ : CauchyFold{};
+    const double k = *loss_scale_factor_;
+    const CauchyFold loss{loss_.a2 * k * k};
     const size_t n = obs_.size();
     double R[9], Jl[9], Rk[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1}, Jlk[9];
     RotationAndJacobian(frame, R, Jl);
@@ -467,7 +468,7 @@ class ViewReprojection final : public ViewBlock {
   }
 
   CauchyFold loss_;
-  std::shared_ptr<const bool> apply_loss_;
+  std::shared_ptr<const double> loss_scale_factor_;
   std::vector<Obs> obs_;
 };
 

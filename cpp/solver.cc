@@ -196,6 +196,10 @@ void Validate(const ffi::ProblemData& d, const ffi::SolveOptions& o) {
   if (o.loss == ffi::LossKind::Cauchy && !(o.loss_scale_px > 0.0 && std::isfinite(o.loss_scale_px))) {
     Fail("loss_scale_px must be a positive number");
   }
+  if (!(o.warm_up_share >= 0.0 && o.warm_up_share <= 1.0) ||
+      !(o.warm_up_scale_factor >= 0.0 && std::isfinite(o.warm_up_scale_factor))) {
+    Fail("warm_up_share must lie in [0, 1] and warm_up_scale_factor must be a non-negative number");
+  }
   if (o.num_threads < 1) Fail("num_threads must be at least 1");
   if (o.max_iterations < 0) Fail("max_iterations must not be negative");
   if (!(o.function_tolerance >= 0.0) || !(o.parameter_tolerance >= 0.0) ||
@@ -225,30 +229,35 @@ struct Assembled {
   // parameter buffer, solved with the rest and never reported.
   std::unique_ptr<double[]> similarity;
   bool frames_linked = false;  // a prior ties frame blocks together (no Schur on frames)
-  // Whether the robust loss applies: shared with every loss and view block, so
-  // that one problem serves the loss-free warm-up, the robust solve and the
-  // plain residuals read after it.
-  std::shared_ptr<bool> apply_loss = std::make_shared<bool>(true);
+  // The robust loss's scale, as a multiple of the configured one (0: no loss):
+  // shared with every loss and view block, so that one problem serves the
+  // warm-up, the robust solve and the plain residuals read after it.
+  std::shared_ptr<double> loss_scale_factor = std::make_shared<double>(1.0);
 };
 
-// Ceres' Cauchy loss behind a switch (off: plain squares).  Ceres takes
-// ownership of one instance shared by every per-corner block.
+// Ceres' Cauchy loss behind a shared scale factor (0: plain squares).  Ceres
+// takes ownership of one instance shared by every per-corner block.
 class SwitchableCauchy final : public ceres::LossFunction {
  public:
-  SwitchableCauchy(double scale, std::shared_ptr<const bool> on) : cauchy_(scale), on_(std::move(on)) {}
+  SwitchableCauchy(double scale, std::shared_ptr<const double> factor)
+      : scale_(scale), cauchy_(scale), factor_(std::move(factor)) {}
   void Evaluate(double s, double rho[3]) const override {
-    if (*on_) {
+    const double k = *factor_;
+    if (k == 1.0) {
       cauchy_.Evaluate(s, rho);
-    } else {
+    } else if (k == 0.0) {
       rho[0] = s;
       rho[1] = 1.0;
       rho[2] = 0.0;
+    } else {
+      ceres::CauchyLoss(scale_ * k).Evaluate(s, rho);
     }
   }
 
  private:
+  double scale_;
   ceres::CauchyLoss cauchy_;
-  std::shared_ptr<const bool> on_;
+  std::shared_ptr<const double> factor_;
 };
 
 // How residuals of one camera are made: its lens model chosen once per camera.
@@ -257,13 +266,13 @@ struct LensOps {
   ceres::CostFunction* (*cost)(double u, double v, double w, const double* x, bool rig,
                                bool reference);
   PoseOnlyView* (*view)(const double* intrinsics, const double* rig);
-  ViewBlock* (*view_block)(bool rig, CauchyFold loss, std::shared_ptr<const bool> apply_loss);
+  ViewBlock* (*view_block)(bool rig, CauchyFold loss, std::shared_ptr<const double> loss_scale_factor);
 };
 
 template <class Lens, class Board>
-ViewBlock* MakeViewBlock(bool rig, CauchyFold loss, std::shared_ptr<const bool> apply_loss) {
-  if (rig) return new ViewReprojection<Lens, Board, true>(loss, std::move(apply_loss));
-  return new ViewReprojection<Lens, Board, false>(loss, std::move(apply_loss));
+ViewBlock* MakeViewBlock(bool rig, CauchyFold loss, std::shared_ptr<const double> loss_scale_factor) {
+  if (rig) return new ViewReprojection<Lens, Board, true>(loss, std::move(loss_scale_factor));
+  return new ViewReprojection<Lens, Board, false>(loss, std::move(loss_scale_factor));
 }
 
 template <class Lens, class Board>
@@ -408,7 +417,7 @@ template <class Board>
 void AddResiduals(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params& p,
                   Assembled& a) {
   const bool cauchy = o.loss == ffi::LossKind::Cauchy;
-  ceres::LossFunction* loss = cauchy ? new SwitchableCauchy(o.loss_scale_px, a.apply_loss) : nullptr;
+  ceres::LossFunction* loss = cauchy ? new SwitchableCauchy(o.loss_scale_px, a.loss_scale_factor) : nullptr;
   const CauchyFold fold{cauchy ? o.loss_scale_px * o.loss_scale_px : 0.0};
   const size_t n = d.obs_uv.size() / 2;
   constexpr bool kHasCorner = Board::kCornerSize > 0;
@@ -456,7 +465,7 @@ void AddResiduals(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params&
     } else if (per_view) {
       const auto [it, fresh] = full_views.index.try_emplace({cam, frame}, full_views.costs.size());
       if (fresh) {
-        full_views.costs.emplace_back(ops[cam].view_block(rig != nullptr, fold, a.apply_loss));
+        full_views.costs.emplace_back(ops[cam].view_block(rig != nullptr, fold, a.loss_scale_factor));
         full_views.blocks.push_back({intrinsics});
         if (rig) full_views.blocks.back().push_back(rig);
         full_views.blocks.back().push_back(frame_block);
@@ -661,24 +670,32 @@ class StderrProgress : public ceres::IterationCallback {
 // Relative tolerances of the loss-free warm-up: it only needs to come close.
 constexpr double kWarmUpTolerance = 1e-3;
 
-// Whether most corners sit beyond the loss's scale: then the start is far from
-// any optimum (Zhang's intrinsics), and a loss-free warm-up pays.  From near an
-// optimum (a re-solve after outlier rejection, a model's stage after
-// `standard`) it would walk to the plain optimum and back, so it is skipped.
+// Whether more than `warm_up_share` of the corners sit beyond the loss's scale:
+// then the start is far from the optimum and a loss-free warm-up pays.  With most
+// corners there (the default share of one half) that is Zhang's start.  From near
+// an optimum (a re-solve after outlier rejection) the warm-up would walk to the
+// plain optimum and back.  A `dynamic` stage starts from unbent boards, where the
+// few corners its bends move most sit beyond the scale; the loss down-weights
+// just those, and its robust solve crawled (kb4: 21 iterations against 3 after a
+// warm-up), so Rust asks for a warm-up there at a smaller share.
 bool FarFromOptimum(Assembled& a, const ffi::SolveOptions& o) {
   ceres::Problem::EvaluateOptions e;
   e.residual_blocks = a.residuals;  // the observations, not the priors
   e.apply_loss_function = false;
   e.num_threads = o.num_threads;
   std::vector<double> r;
-  *a.apply_loss = false;
+  *a.loss_scale_factor = 0.0;
   const bool ok = a.problem->Evaluate(e, nullptr, &r, nullptr, nullptr);
-  *a.apply_loss = true;
+  *a.loss_scale_factor = 1.0;
   if (!ok || r.empty()) return false;
   std::vector<double> s(r.size() / 2);
   for (size_t i = 0; i < s.size(); ++i) s[i] = r[2 * i] * r[2 * i] + r[2 * i + 1] * r[2 * i + 1];
-  std::nth_element(s.begin(), s.begin() + s.size() / 2, s.end());
-  return s[s.size() / 2] > o.loss_scale_px * o.loss_scale_px;
+  // The corner at this rank (from the bottom) is beyond the loss's scale exactly
+  // when more than `warm_up_share` of them are.
+  const double below = std::clamp(1.0 - o.warm_up_share, 0.0, 1.0);
+  const size_t k = std::min(s.size() - 1, static_cast<size_t>(below * static_cast<double>(s.size())));
+  std::nth_element(s.begin(), s.begin() + k, s.end());
+  return s[k] > o.loss_scale_px * o.loss_scale_px;
 }
 
 ceres::Solver::Options MakeSolverOptions(const ffi::SolveOptions& o) {
@@ -781,10 +798,10 @@ bool OrderedResiduals(Assembled& a, size_t num_observations, int threads, double
   }
   std::vector<double> by_block;
   // Plain residuals: the loss folded into view blocks is switched off too.
-  const bool robust = *a.apply_loss;
-  *a.apply_loss = false;
+  const double robust = *a.loss_scale_factor;
+  *a.loss_scale_factor = 0.0;
   const bool ok = a.problem->Evaluate(e, cost, &by_block, nullptr, jacobian);
-  *a.apply_loss = robust;
+  *a.loss_scale_factor = robust;
   if (!ok) return false;
   out->assign(2 * num_observations, 0.0);
   // Ceres' row r is observation row order[r].
@@ -828,7 +845,7 @@ FreeColumns FreeColumnsOf(const Assembled& a, const double* base) {
 void DirectJacobian(const Assembled& a, const double* base, size_t num_observations,
                     ffi::Jacobian& out) {
   const ceres::Problem& problem = *a.problem;
-  *a.apply_loss = false;  // the Jacobian of the plain residuals
+  *a.loss_scale_factor = 0.0;  // the Jacobian of the plain residuals
   const FreeColumns f = FreeColumnsOf(a, base);
   // Rows come block by block; observation i's two rows go to rows 2i, 2i+1.
   std::vector<uint32_t> cols;
@@ -1004,18 +1021,18 @@ SolveReport solve(ProblemData& data, const SolveOptions& options) {
   int warm_up_iterations = 0;
   if (options.loss == LossKind::Cauchy && !PreviousPath(data, options) &&
       FarFromOptimum(a, options)) {
-    // Plain least squares first: from a start far off (Zhang's) it takes the
-    // big steps in a few Gauss-Newton iterations, where the loss's reweighting
-    // crawls; the robust solve then starts close.  The answer is the robust
-    // solve's alone, so it does not change.
-    *a.apply_loss = false;
+    // Plain least squares (or a wider loss) first: from a start far off
+    // (Zhang's) it takes the big steps in a few Gauss-Newton iterations, where
+    // the loss's reweighting crawls; the robust solve then starts close.  The
+    // answer is the robust solve's alone, so it does not change.
+    *a.loss_scale_factor = options.warm_up_scale_factor;
     ceres::Solver::Options w = s;
     w.function_tolerance = std::max(s.function_tolerance, kWarmUpTolerance);
     w.parameter_tolerance = std::max(s.parameter_tolerance, kWarmUpTolerance);
-    if (options.verbose) std::fprintf(stderr, "  without the loss:\n");
+    if (options.verbose) std::fprintf(stderr, "  warm-up, loss scale x%g:\n", options.warm_up_scale_factor);
     ceres::Solve(w, a.problem.get(), &summary);
     warm_up_iterations = static_cast<int>(summary.iterations.size()) - 1;
-    *a.apply_loss = true;
+    *a.loss_scale_factor = 1.0;
     if (options.verbose) std::fprintf(stderr, "  with the loss:\n");
   }
   ceres::Solve(s, a.problem.get(), &summary);

@@ -3,7 +3,7 @@ mod common;
 use common::*;
 use deformcal::model::synthetic::Preset;
 use deformcal::solver::problem::Loss;
-use deformcal::solver::problem::{Problem, SolverSettings};
+use deformcal::solver::problem::{Problem, SolverSettings, WarmUp};
 use deformcal::{Calibration, Method};
 use nalgebra::{DMatrix, Vector3};
 
@@ -318,4 +318,58 @@ fn per_view_blocks_and_warm_up_reach_the_per_corner_optimum() {
             assert!(e < 1e-3, "{m} camera {k}: {e} px between the two paths");
         }
     }
+}
+
+#[test]
+fn a_loss_free_warm_up_of_a_fresh_bend_stage_reaches_the_same_optimum() {
+    // `dynamic`'s own stage starts from unbent boards and runs a warm-up with a
+    // wider loss once 5 % of the corners lie beyond the loss's scale (the
+    // default waits for half). On a fisheye whose bent board views reach the
+    // image corners, where the warm-up is taken, both must end at one robust
+    // optimum.
+    let (d, _) = deformcal::model::synthetic::Generator::new(Preset::T2, Some(25), 7)
+        .with_models(&[deformcal::LensModel::Kb4])
+        .generate();
+    let start = run(&d, Method::Standard, Loss::Cauchy);
+    let problem = Problem {
+        dataset: &start.dataset,
+        method: Method::Dynamic,
+        gauge: Vec::new(),
+        frozen: Vec::new(),
+        hold: Default::default(),
+    };
+    let solve = |warm_up: WarmUp| {
+        let mut state = start.state.clone();
+        let settings = SolverSettings {
+            warm_up,
+            function_tolerance: 1e-14,
+            parameter_tolerance: 1e-12,
+            gradient_tolerance: 1e-14,
+            max_iterations: 500,
+            ..SolverSettings::default()
+        };
+        let report = problem.solve(&mut state, &settings).unwrap();
+        assert!(report.converged, "{}", report.message);
+        state
+    };
+    let (median_rule, fresh) = (solve(WarmUp::FAR_START), solve(WarmUp::FRESH_BENDS));
+    let cam = &d.cameras[0];
+    let e = deformcal::model::metrics::mapping_error(
+        &median_rule.intrinsics[0],
+        &fresh.intrinsics[0],
+        cam.width,
+        cam.height,
+    );
+    assert!(e < 1e-4, "{e} px between the two starts");
+    // The two take different paths: between 5 % and half of the corners start
+    // beyond the loss's scale (1 px), so only the fresh share runs the warm-up.
+    let r = &start.residuals;
+    let beyond = (0..r.len() / 2)
+        .filter(|&i| r[2 * i].hypot(r[2 * i + 1]) > 1.0)
+        .count() as f64
+        / (r.len() / 2) as f64;
+    assert!(
+        beyond > WarmUp::FRESH_BENDS.share && beyond < WarmUp::FAR_START.share,
+        "{beyond} of the corners beyond the scale"
+    );
 }

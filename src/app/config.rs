@@ -245,6 +245,7 @@ impl From<&CalibrationConfig> for SolverSettings {
             verbose: c.verbose,
             reference_jacobian: false,
             per_corner_blocks: false,
+            warm_up: SolverSettings::default().warm_up,
             outlier_k: c.outlier_k,
             board: BoardPriors {
                 static_sigma_m: c.static_prior_mm.and_then(PriorSigma::mm).map(|v| v * 1e-3),

@@ -86,6 +86,11 @@ pub mod ffi {
         /// checked against: one residual block per corner, Ceres' Cauchy loss
         /// from the first iteration.
         per_corner_blocks: bool,
+        /// Share of the corners beyond the loss's scale above which a robust
+        /// solve first runs a warm-up (see `problem::WarmUp`).
+        warm_up_share: f64,
+        /// The warm-up's loss scale as a multiple of `loss_scale_px` (0: no loss).
+        warm_up_scale_factor: f64,
     }
 
     /// What Ceres reported about one solve.

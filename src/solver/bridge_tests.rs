@@ -16,6 +16,8 @@ fn options() -> SolveOptions {
         verbose: false,
         reference_jacobian: false,
         per_corner_blocks: false,
+        warm_up_share: 0.5,
+        warm_up_scale_factor: 0.0,
     }
 }
 

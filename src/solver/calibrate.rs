@@ -11,6 +11,7 @@ use crate::model::{fisheye_init, zhang};
 use crate::solver::auto_prior::{AutoPrior, Estimate};
 use crate::solver::problem::{
     choose_gauge, rmse, underobserved_corners, Hold, Problem, SolveReport, SolverSettings, State,
+    WarmUp,
 };
 use crate::solver::robust;
 use nalgebra::{Matrix3, Vector2};
@@ -631,17 +632,27 @@ fn solve_method(
         ));
     }
     let problem = method_problem(dataset, request.method, &gauge, &frozen);
+    // The first solve of a method without per-corner corrections starts from
+    // unbent boards (see `WarmUp::FRESH_BENDS`).
+    let fresh = |mut s: SolverSettings| {
+        if !request.method.has_correction() {
+            s.warm_up = WarmUp::FRESH_BENDS;
+        }
+        s
+    };
+    let mut settings = fresh(request.settings.clone());
     if request.settings.board.smoothness_sigma_m.is_some() {
         // The smoothness prior is robust, so not convex: started from unbent
         // frames (all alike, in its quadratic core) it holds bends the data want
         // apart. Each frame's own bend first, then the frames tied.
-        let mut own = warm_start_settings(request);
+        let mut own = fresh(warm_start_settings(request));
         own.board.smoothness_sigma_m = None;
         let report = problem.solve(state, &own)?;
         robust::check_stage(request.method, &report, true)?;
         stages.push(Stage::new(request.method, &report));
+        settings = request.settings.clone();
     }
-    let report = problem.solve(state, &request.settings)?;
+    let report = problem.solve(state, &settings)?;
     robust::check_stage(request.method, &report, true)?;
     stages.push(Stage::new(request.method, &report));
     Ok((gauge, frozen, report.residuals))
