@@ -658,6 +658,55 @@ fn solve_method(
     Ok((gauge, frozen, report.residuals))
 }
 
+/// The first solve again from the lens registry's second start of each camera
+/// that has one (`LensInfo::second_start`) and fixes none of the values it moves,
+/// keeping whichever of the two ends at the lower cost; `first` when no camera
+/// has one, or the second solve fails.
+/// The second solve's stage is recorded either way.
+fn from_second_start(
+    problem: &Problem,
+    start: &State,
+    state: &mut State,
+    first: SolveReport,
+    request: &Request,
+    stages: &mut Vec<Stage>,
+) -> Result<SolveReport> {
+    let mut other = start.clone();
+    let mut any = false;
+    for (k, camera) in other.intrinsics.iter_mut().zip(&problem.dataset.cameras) {
+        let Some(second) = k.model().info().second_start else {
+            continue;
+        };
+        let moved = second(k);
+        // A parameter the user fixed keeps its initial value: no second start
+        // that would move it.
+        let names = k.model().info().params;
+        let holds_fixed = names
+            .iter()
+            .zip(k.params().iter().zip(moved.params()))
+            .all(|(name, (a, b))| a == b || !camera.fix.iter().any(|f| f == name));
+        if holds_fixed {
+            *k = moved;
+            any = true;
+        }
+    }
+    if !any {
+        return Ok(first);
+    }
+    let Ok(report) = problem.solve(&mut other, &warm_start_settings(request)) else {
+        return Ok(first);
+    };
+    // Recorded either way: the stages list every solve.
+    stages.push(Stage::new(Method::Standard, &report));
+    if robust::check_stage(Method::Standard, &report, true).is_err()
+        || report.final_cost.partial_cmp(&first.final_cost) != Some(std::cmp::Ordering::Less)
+    {
+        return Ok(first);
+    }
+    *state = other;
+    Ok(report)
+}
+
 /// Runs the whole pipeline on one dataset.
 pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {
     let mut c = fit(dataset, request)?;
@@ -685,9 +734,18 @@ pub fn fit(dataset: &Dataset, request: &Request) -> Result<Calibration> {
         frozen: Vec::new(),
         hold: Hold::default(),
     };
+    let initial = state.clone();
     let report = standard.solve(&mut state, &warm_start_settings(request))?;
     robust::check_stage(Method::Standard, &report, true)?;
     stages.push(Stage::new(Method::Standard, &report));
+    let report = from_second_start(
+        &standard,
+        &initial,
+        &mut state,
+        report,
+        request,
+        &mut stages,
+    )?;
 
     let mut request = with_prior_noise(request, &dataset, &report.residuals);
     let (gauge, frozen, residuals) = if request.method == Method::Standard {
