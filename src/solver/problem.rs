@@ -391,19 +391,8 @@ impl Problem<'_> {
 
     /// Refines `state` in place; an unusable solve is an error, a non-converged one is reported.
     pub fn solve(&self, state: &mut State, settings: &SolverSettings) -> Result<SolveReport> {
-        let layout = self.layout();
-        let mut data = self.data(state, &layout, settings)?;
-        let mut report = ffi::solve(&mut data, &settings.options())
-            .map_err(|e| Error::Problem(e.what().to_string()))?;
-        if !report.usable {
-            return Err(Error::Solver(format!(
-                "{} method failed: {}",
-                self.method, report.message
-            )));
-        }
-        self.unweight(&mut report.residuals);
-        layout.unpack(&data.params, state);
-        Ok(report)
+        let what = format!("{} method", self.method);
+        self.run(state, settings, ffi::solve, &what)
     }
 
     /// The same as [`Problem::solve`] for a pose-only refit (everything but the
@@ -411,15 +400,27 @@ impl Problem<'_> {
     /// solved on its own to round-off, without a Ceres problem; several times faster.
     /// Other problems are refused.
     pub fn refit_poses(&self, state: &mut State, settings: &SolverSettings) -> Result<SolveReport> {
+        self.run(state, settings, ffi::refit_poses, "the pose refit")
+    }
+
+    /// Runs one of the bridge's solvers on this problem from `state` and unpacks
+    /// the result into it; `what` names the solve in the error of an unusable one.
+    fn run(
+        &self,
+        state: &mut State,
+        settings: &SolverSettings,
+        solver: fn(
+            &mut ProblemData,
+            &SolveOptions,
+        ) -> std::result::Result<SolveReport, cxx::Exception>,
+        what: &str,
+    ) -> Result<SolveReport> {
         let layout = self.layout();
         let mut data = self.data(state, &layout, settings)?;
-        let mut report = ffi::refit_poses(&mut data, &settings.options())
+        let mut report = solver(&mut data, &settings.options())
             .map_err(|e| Error::Problem(e.what().to_string()))?;
         if !report.usable {
-            return Err(Error::Solver(format!(
-                "the pose refit failed: {}",
-                report.message
-            )));
+            return Err(Error::Solver(format!("{what} failed: {}", report.message)));
         }
         self.unweight(&mut report.residuals);
         layout.unpack(&data.params, state);
