@@ -667,11 +667,12 @@ class StderrProgress : public ceres::IterationCallback {
   }
 };
 
-// Relative tolerances of the loss-free warm-up: it only needs to come close.
+// Relative tolerances of the warm-up: it only needs to come close.
 constexpr double kWarmUpTolerance = 1e-3;
 
 // Whether more than `warm_up_share` of the corners sit beyond the loss's scale:
-// then the start is far from the optimum and a loss-free warm-up pays.  With most
+// then the start is far from the optimum and a warm-up (loss-free, or with a
+// wider loss) pays.  With most
 // corners there (the default share of one half) that is Zhang's start.  From near
 // an optimum (a re-solve after outlier rejection) the warm-up would walk to the
 // plain optimum and back.  A `dynamic` stage starts from unbent boards, where the
