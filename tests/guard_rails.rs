@@ -164,15 +164,13 @@ fn a_fisheye_taken_for_a_pinhole_fails_with_the_lens_hint() {
     };
     let failed = calibrate(&as_radial3, &request(Method::Standard)).unwrap();
     let reasons = guard::reasons(&failed, Rules { max_rmse_px: None });
-    let total = failed.rejected.len() + failed.dataset.observations.len();
-    assert_eq!(
-        reasons[0],
-        format!(
-            "outlier rejection removed {} of its {total} observations ({:.0}%): the model describes only the rest",
-            failed.rejected.len(),
-            100.0 * failed.rejected.len() as f64 / total as f64
-        )
+    // A pinhole cannot follow the fisheye: the solve wanders and does not
+    // converge, and no outlier rejection runs on a solve that stopped short.
+    assert!(
+        reasons[0].starts_with("the standard solve did not converge after "),
+        "{reasons:?}"
     );
+    assert!(failed.rejected.is_empty());
     assert!(
         last.starts_with(&format!(
             "error: the calibration FAILED: {}",

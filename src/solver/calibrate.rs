@@ -862,7 +862,14 @@ fn finish_robustly(
         frozen,
         hold: Hold::default(),
     };
-    let r = robust::reject_outliers(problem, state, &request.settings, residuals)?;
+    // The residuals of a solve that stopped short are not the model's: what
+    // stands out there is where the solve had yet to go, not a bad detection.
+    // The result fails the guard rails as not converged, with its data whole.
+    let mut settings = request.settings.clone();
+    if !stages.last().is_some_and(|s| s.converged) {
+        settings.outlier_k = 0.0;
+    }
+    let r = robust::reject_outliers(problem, state, &settings, residuals)?;
     for report in &r.reports {
         stages.push(Stage::new(request.method, report));
     }
