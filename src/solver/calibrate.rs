@@ -591,9 +591,15 @@ fn with_auto_prior(
     Ok(before)
 }
 
-/// The settings of the `standard` stage.
-fn warm_start_settings(request: &Request) -> SolverSettings {
-    if request.method == Method::Standard {
+/// The settings of the first `standard` solve: the request's where its result is
+/// the answer, loose where a later solve polishes it: a deformation method's
+/// stage, or `standard` again once the noise that weights the lens prior is
+/// estimated.
+fn warm_start_settings(request: &Request, dataset: &Dataset) -> SolverSettings {
+    let models: Vec<_> = dataset.cameras.iter().map(|c| c.model).collect();
+    let reweighted =
+        request.settings.lens_prior_on(&models) && request.settings.board.noise_px.is_none();
+    if request.method == Method::Standard && !reweighted {
         request.settings.clone()
     } else {
         // A warm start only needs to be close: the final stage polishes it.
@@ -645,7 +651,7 @@ fn solve_method(
         // The smoothness prior is robust, so not convex: started from unbent
         // frames (all alike, in its quadratic core) it holds bends the data want
         // apart. Each frame's own bend first, then the frames tied.
-        let mut own = fresh(warm_start_settings(request));
+        let mut own = fresh(warm_start_settings(request, problem.dataset));
         own.board.smoothness_sigma_m = None;
         let report = problem.solve(state, &own)?;
         robust::check_stage(request.method, &report, true)?;
@@ -693,7 +699,8 @@ fn from_second_start(
     if !any {
         return Ok(first);
     }
-    let Ok(report) = problem.solve(&mut other, &warm_start_settings(request)) else {
+    let Ok(report) = problem.solve(&mut other, &warm_start_settings(request, problem.dataset))
+    else {
         return Ok(first);
     };
     // Recorded either way: the stages list every solve.
@@ -735,7 +742,7 @@ pub fn fit(dataset: &Dataset, request: &Request) -> Result<Calibration> {
         hold: Hold::default(),
     };
     let initial = state.clone();
-    let report = standard.solve(&mut state, &warm_start_settings(request))?;
+    let report = standard.solve(&mut state, &warm_start_settings(request, &dataset))?;
     robust::check_stage(Method::Standard, &report, true)?;
     stages.push(Stage::new(Method::Standard, &report));
     let report = from_second_start(
