@@ -13,7 +13,7 @@
 //! preset as stills, as a video and as a hand-held video: temporal smoothness in
 //! time order and shuffled), `geometry` (a board measured on the 650-image
 //! reference loaded into 25-image `standard` and `static` calibrations) or `all`;
-//! `SUBSETS=n` shortens the protocol runs.
+//! `SUBSETS=n` shortens the protocol runs; `VIDEO_SEEDS=n` sets the video seeds (3).
 use deformcal::app::config::{Config, ProtocolConfig};
 use deformcal::app::protocol::prepare;
 use deformcal::model::board::{BoardGeometry, Method};
@@ -550,7 +550,11 @@ fn video() {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(1.0);
-    let seeds: Vec<u64> = (1..=subsets().min(3) as u64).collect();
+    let count: u64 = std::env::var("VIDEO_SEEDS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(3);
+    let seeds: Vec<u64> = (1..=count).collect();
     for scenario in ["stills", "video", "hand-held"] {
         let lines: Vec<String> = seeds
             .par_iter()
