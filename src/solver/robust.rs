@@ -301,11 +301,16 @@ fn local_deviations(dataset: &Dataset, residuals: &[f64]) -> Vec<f64> {
                     (a, w)
                 })
             };
-            let adjacent: Vec<([f64; 2], [f64; 8])> = (0..4).filter_map(single).collect();
-            let predictions = if adjacent.len() == 4 {
-                adjacent
-            } else {
-                let mut predictions = Vec::with_capacity(6);
+            // On the stack: this runs for every corner in every rejection round.
+            let mut adjacent = [([0.0; 2], [0.0; 8]); 4];
+            let mut adjacent_count = 0;
+            for p in (0..4).filter_map(single) {
+                adjacent[adjacent_count] = p;
+                adjacent_count += 1;
+            }
+            let mut linear = [([0.0; 2], [0.0; 8]); 6];
+            let mut linear_count = 0;
+            if adjacent_count < 4 {
                 for (a, b) in [(0, 1), (2, 3)] {
                     if let (Some(x), Some(y)) = (
                         residual(corner, DIRECTIONS[a], 1),
@@ -313,7 +318,8 @@ fn local_deviations(dataset: &Dataset, residuals: &[f64]) -> Vec<f64> {
                     ) {
                         let mut w = [0.0; 8];
                         (w[2 * a], w[2 * b]) = (0.5, 0.5);
-                        predictions.push(([0.5 * (x[0] + y[0]), 0.5 * (x[1] + y[1])], w));
+                        linear[linear_count] = ([0.5 * (x[0] + y[0]), 0.5 * (x[1] + y[1])], w);
+                        linear_count += 1;
                     }
                 }
                 for (d, &step) in DIRECTIONS.iter().enumerate() {
@@ -322,14 +328,15 @@ fn local_deviations(dataset: &Dataset, residuals: &[f64]) -> Vec<f64> {
                     {
                         let mut w = [0.0; 8];
                         (w[2 * d], w[2 * d + 1]) = (2.0, -1.0);
-                        predictions.push(([2.0 * x[0] - y[0], 2.0 * x[1] - y[1]], w));
+                        linear[linear_count] = ([2.0 * x[0] - y[0], 2.0 * x[1] - y[1]], w);
+                        linear_count += 1;
                     }
                 }
-                if predictions.is_empty() {
-                    adjacent
-                } else {
-                    predictions
-                }
+            }
+            let predictions = if linear_count > 0 {
+                &linear[..linear_count]
+            } else {
+                &adjacent[..adjacent_count]
             };
             let r = [residuals[2 * i], residuals[2 * i + 1]];
             let (prediction, noise) = if predictions.is_empty() {
@@ -341,8 +348,7 @@ fn local_deviations(dataset: &Dataset, residuals: &[f64]) -> Vec<f64> {
                 let spread: f64 = (0..8)
                     .map(|k| (predictions.iter().map(|p| p.1[k]).sum::<f64>() / m).powi(2))
                     .sum();
-                let values: Vec<[f64; 2]> = predictions.iter().map(|p| p.0).collect();
-                (median2(&values), (1.0 + spread).sqrt())
+                (median2(predictions), (1.0 + spread).sqrt())
             };
             let deviation = (r[0] - prediction[0])
                 .abs()
@@ -359,11 +365,14 @@ fn local_deviations(dataset: &Dataset, residuals: &[f64]) -> Vec<f64> {
 /// Left, right, up, down on the board, as (row, column) steps.
 const DIRECTIONS: [(isize, isize); 4] = [(0, -1), (0, 1), (-1, 0), (1, 0)];
 
-/// The component-wise median of 2-vectors.
-fn median2(values: &[[f64; 2]]) -> [f64; 2] {
-    let mut us: Vec<f64> = values.iter().map(|v| v[0]).collect();
-    let mut vs: Vec<f64> = values.iter().map(|v| v[1]).collect();
-    [median(&mut us), median(&mut vs)]
+/// The component-wise median of (at most six) predicted 2-vectors.
+fn median2(predictions: &[([f64; 2], [f64; 8])]) -> [f64; 2] {
+    let (mut us, mut vs) = ([0.0; 6], [0.0; 6]);
+    let n = predictions.len();
+    for (k, p) in predictions.iter().enumerate() {
+        (us[k], vs[k]) = (p.0[0], p.0[1]);
+    }
+    [median(&mut us[..n]), median(&mut vs[..n])]
 }
 
 /// The corners within [`REACH`] of `corner` along its row and column: those whose
