@@ -596,10 +596,7 @@ fn with_auto_prior(
 /// stage, or `standard` again once the noise that weights the lens prior is
 /// estimated.
 fn warm_start_settings(request: &Request, dataset: &Dataset) -> SolverSettings {
-    let models: Vec<_> = dataset.cameras.iter().map(|c| c.model).collect();
-    let reweighted =
-        request.settings.lens_prior_on(&models) && request.settings.board.noise_px.is_none();
-    if request.method == Method::Standard && !reweighted {
+    if request.method == Method::Standard && !lens_prior_reweighted(request, dataset) {
         request.settings.clone()
     } else {
         // A warm start only needs to be close: the final stage polishes it.
@@ -756,7 +753,7 @@ pub fn fit(dataset: &Dataset, request: &Request) -> Result<Calibration> {
 
     let mut request = with_prior_noise(request, &dataset, &report.residuals);
     let (gauge, frozen, residuals) = if request.method == Method::Standard {
-        let residuals = if lens_prior_reweighted(request_in, &request, &dataset) {
+        let residuals = if lens_prior_reweighted(request_in, &dataset) {
             // The lens prior weighted by the estimated noise, not the provisional
             // one: a polish from the optimum, which may take no step at all.
             let report = standard.solve(&mut state, &request.settings)?;
@@ -836,12 +833,12 @@ fn with_prior_noise(request: &Request, dataset: &Dataset, residuals: &[f64]) -> 
     r
 }
 
-/// Whether the lens prior's weight changed from the first `standard` solve
-/// (`before`) to the method's (`after`): the noise was estimated in between.
-fn lens_prior_reweighted(before: &Request, after: &Request, dataset: &Dataset) -> bool {
+/// Whether the lens prior is weighted by a noise estimated after the first
+/// `standard` solve (it acts, and no noise is configured; see
+/// [`with_prior_noise`]): that solve is then polished by a second one.
+fn lens_prior_reweighted(request: &Request, dataset: &Dataset) -> bool {
     let models: Vec<_> = dataset.cameras.iter().map(|c| c.model).collect();
-    after.settings.lens_prior_on(&models)
-        && before.settings.board.noise_px != after.settings.board.noise_px
+    request.settings.lens_prior_on(&models) && request.settings.board.noise_px.is_none()
 }
 
 /// What [`finish_robustly`] hands back: the data kept, their residuals, the frozen
