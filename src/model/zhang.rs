@@ -224,6 +224,72 @@ pub fn pose_from_homography(h: &Matrix3<f64>, k: &Intrinsics) -> Option<Pose> {
         .then(|| Pose::from_parts(&rot, &t))
 }
 
+/// The board pose (camera-from-board) from rays to its corners: a DLT of the
+/// board-plane homography that asks only that each ray be parallel to H·(x, y, 1),
+/// not that it point forward, so a board at or beyond 90° off axis (seen by a
+/// fisheye) is posed like any other. The sign puts the corners ahead along their
+/// rays. `None` when degenerate.
+pub fn pose_from_rays(board: &[Vector2<f64>], rays: &[Vector3<f64>]) -> Option<Pose> {
+    if board.len() < 4 || board.len() != rays.len() {
+        return None;
+    }
+    let tb = normalisation(board);
+    let mut ata = nalgebra::SMatrix::<f64, 9, 9>::zeros();
+    for (b, r) in board.iter().zip(rays) {
+        let b = apply(&tb, b);
+        let r = r.normalize();
+        let x = [b.x, b.y, 1.0];
+        // The three rows of r × (H x) = 0; their span has rank 2.
+        let mut rows = [[0.0; 9]; 3];
+        for c in 0..3 {
+            rows[0][3 + c] = -r.z * x[c];
+            rows[0][6 + c] = r.y * x[c];
+            rows[1][c] = r.z * x[c];
+            rows[1][6 + c] = -r.x * x[c];
+            rows[2][c] = -r.y * x[c];
+            rows[2][3 + c] = r.x * x[c];
+        }
+        for row in &rows {
+            let v = nalgebra::SVector::<f64, 9>::from_row_slice(row);
+            ata += v * v.transpose();
+        }
+    }
+    let eig = ata.symmetric_eigen();
+    let mut order: Vec<usize> = (0..9).collect();
+    order.sort_by(|&i, &j| eig.eigenvalues[i].total_cmp(&eig.eigenvalues[j]));
+    if eig.eigenvalues[order[1]] <= 1e-10 * eig.eigenvalues[order[8]].max(1e-300) {
+        return None;
+    }
+    let h = eig.eigenvectors.column(order[0]);
+    let h = Matrix3::new(h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], h[8]) * tb;
+    let (c1, c2, c3) = (
+        h.column(0).into_owned(),
+        h.column(1).into_owned(),
+        h.column(2).into_owned(),
+    );
+    let mut scale = 2.0 / (c1.norm() + c2.norm());
+    let ahead: f64 = board
+        .iter()
+        .zip(rays)
+        .map(|(b, r)| r.dot(&(h * Vector3::new(b.x, b.y, 1.0))))
+        .sum();
+    if ahead < 0.0 {
+        scale = -scale;
+    }
+    let (r1, r2) = (c1 * scale, c2 * scale);
+    let svd = Matrix3::from_columns(&[r1, r2, r1.cross(&r2)]).svd(true, true);
+    let (u, vt) = (svd.u?, svd.v_t?);
+    let mut r = u * vt;
+    if r.determinant() < 0.0 {
+        let mut u = u;
+        u.column_mut(2).neg_mut();
+        r = u * vt;
+    }
+    let t = c3 * scale;
+    (t.iter().chain(r.iter()).all(|v| v.is_finite()))
+        .then(|| Pose::from_parts(&Rotation3::from_matrix_unchecked(r), &t))
+}
+
 /// Intrinsics from homographies: the closed form, else the centred fallback.
 pub fn initial_intrinsics(
     hs: &[Matrix3<f64>],
@@ -241,4 +307,51 @@ pub fn initial_intrinsics(
                 hs.len()
             ))
         })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Exact rays from a known pose give that pose back, for a board ahead of the
+    /// camera and for one beside and behind it (its centre 110° off axis), where
+    /// a homography of pixels or of normalised coordinates does not exist.
+    #[test]
+    fn pose_from_rays_recovers_poses_beyond_ninety_degrees() {
+        let board: Vec<Vector2<f64>> = (0..35)
+            .map(|i| Vector2::new((i % 7) as f64 * 0.03, (i / 7) as f64 * 0.03))
+            .collect();
+        for (axis_angle, t, beside) in [
+            (
+                Vector3::new(0.2, -0.1, 0.05),
+                Vector3::new(-0.1, 0.05, 0.6),
+                false,
+            ),
+            (
+                Vector3::new(0.1, 1.4, 0.3),
+                Vector3::new(0.5, 0.02, -0.18),
+                true,
+            ),
+        ] {
+            let truth = Pose::from_parts(&Rotation3::new(axis_angle), &t);
+            let rays: Vec<Vector3<f64>> = board
+                .iter()
+                .map(|b| truth.transform(&Vector3::new(b.x, b.y, 0.0)).normalize() * 3.0)
+                .collect();
+            let centre = truth.transform(&Vector3::new(0.09, 0.06, 0.0));
+            // The angle between the optical axis and the ray to the board's centre.
+            let off_axis = centre.xy().norm().atan2(centre.z).to_degrees();
+            assert_eq!(beside, off_axis > 100.0, "{off_axis}°");
+            let pose = pose_from_rays(&board, &rays).expect("a pose");
+            let dr = (pose.rotation_matrix().matrix() - truth.rotation_matrix().matrix()).norm();
+            let dt = (pose.translation_vector() - t).norm();
+            assert!(
+                dr < 1e-9 && dt < 1e-9,
+                "off by {dr} (rotation matrix), {dt} m (centre {centre:?})"
+            );
+        }
+        let collinear: Vec<Vector2<f64>> = (0..6).map(|i| Vector2::new(i as f64, 0.0)).collect();
+        let rays = vec![Vector3::new(0.0, 0.0, 1.0); 6];
+        assert!(pose_from_rays(&collinear, &rays).is_none());
+    }
 }

@@ -13,7 +13,7 @@ use crate::solver::problem::{
     choose_gauge, rmse, underobserved_corners, Hold, Problem, SolveReport, SolverSettings, State,
     WarmUp,
 };
-use crate::solver::robust;
+use crate::solver::{repose, robust};
 use nalgebra::{Matrix3, Vector2};
 use std::collections::HashMap;
 use std::time::Instant;
@@ -696,18 +696,49 @@ fn from_second_start(
     if !any {
         return Ok(first);
     }
-    let Ok(report) = problem.solve(&mut other, &warm_start_settings(request, problem.dataset))
-    else {
+    let warm = warm_start_settings(request, problem.dataset);
+    let Ok(report) = problem.solve(&mut other, &warm) else {
         return Ok(first);
     };
     // Recorded either way: the stages list every solve.
     stages.push(Stage::new(Method::Standard, &report));
-    if robust::check_stage(Method::Standard, &report, true).is_err()
-        || report.final_cost.partial_cmp(&first.final_cost) != Some(std::cmp::Ordering::Less)
-    {
+    if robust::check_stage(Method::Standard, &report, true).is_err() {
+        return Ok(first);
+    }
+    let Ok(report) = with_stray_frames_reposed(problem, &mut other, report, &warm, stages) else {
+        return Ok(first);
+    };
+    if report.final_cost.partial_cmp(&first.final_cost) != Some(std::cmp::Ordering::Less) {
         return Ok(first);
     }
     *state = other;
+    Ok(report)
+}
+
+/// At most this many rounds of re-posing frames and repeating the first solve.
+/// A round poses only the frames that the intrinsics of the round before unproject
+/// well enough; with those frames back, the next intrinsics pose the rest (a bent
+/// `ds` set needed four rounds).
+const REPOSE_ROUNDS: usize = 5;
+
+/// The `standard` solve repeated after the frames it left in a wrong pose basin
+/// get a pose from its solved intrinsics (`solver::repose`); `report` when no
+/// frame is re-posed. Every repeat is recorded as a stage.
+fn with_stray_frames_reposed(
+    problem: &Problem,
+    state: &mut State,
+    mut report: SolveReport,
+    settings: &SolverSettings,
+    stages: &mut Vec<Stage>,
+) -> Result<SolveReport> {
+    for _ in 0..REPOSE_ROUNDS {
+        if repose::repose_stray_frames(problem, state, &report.residuals, settings)? == 0 {
+            break;
+        }
+        report = problem.solve(state, settings)?;
+        robust::check_stage(Method::Standard, &report, false)?;
+        stages.push(Stage::new(Method::Standard, &report));
+    }
     Ok(report)
 }
 
@@ -739,9 +770,11 @@ pub fn fit(dataset: &Dataset, request: &Request) -> Result<Calibration> {
         hold: Hold::default(),
     };
     let initial = state.clone();
-    let report = standard.solve(&mut state, &warm_start_settings(request, &dataset))?;
+    let warm = warm_start_settings(request, &dataset);
+    let report = standard.solve(&mut state, &warm)?;
     robust::check_stage(Method::Standard, &report, true)?;
     stages.push(Stage::new(Method::Standard, &report));
+    let report = with_stray_frames_reposed(&standard, &mut state, report, &warm, &mut stages)?;
     let report = from_second_start(
         &standard,
         &initial,

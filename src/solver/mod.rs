@@ -7,6 +7,7 @@ pub mod calibrate;
 pub mod covariance;
 pub mod health;
 pub mod problem;
+mod repose;
 pub mod residuals;
 pub mod robust;
 pub mod select;
