@@ -158,7 +158,62 @@ pub fn initialise(
             }
         }
     }
-    Some((neutral(f), poses))
+    let k = neutral(f);
+    repose_outlying_views(&k, views, &mut poses);
+    Some((k, poses))
+}
+
+/// A view whose pose reprojects this many times worse than the median view's is
+/// posed again from all of its rays.
+const OUTLYING_VIEW: f64 = 3.0;
+
+/// Poses from all rays for the views without one and for those far worse than
+/// the median view, kept where they at least halve the view's RMS. A view near 90°
+/// off axis has few rays in front within 80°, and a pose from those few (or from
+/// another focal length) can lie in a wrong basin. For the other views the pose
+/// from the central rays stays: under the undistorted guess of the lens those rays
+/// are the trustworthy ones, and on the presets' `ds` lens replacing every pose
+/// that all rays fit better cost 45 % more iterations.
+fn repose_outlying_views(k: &Intrinsics, views: &[ViewPoints], poses: &mut [Option<Pose>]) {
+    let rms: Vec<f64> = poses
+        .iter()
+        .zip(views)
+        .map(|(p, (board, pixels))| p.map_or(f64::INFINITY, |p| view_rms(k, &p, board, pixels)))
+        .collect();
+    let mut finite: Vec<f64> = rms.iter().copied().filter(|e| e.is_finite()).collect();
+    finite.sort_by(f64::total_cmp);
+    let bound = finite
+        .get(finite.len() / 2)
+        .map_or(0.0, |m| OUTLYING_VIEW * m);
+    for ((pose, (board, pixels)), &e) in poses.iter_mut().zip(views).zip(&rms) {
+        if e <= bound {
+            continue;
+        }
+        if let Some(all) = pose_from_all_rays(k, board, pixels) {
+            if view_rms(k, &all, board, pixels) < 0.5 * e {
+                *pose = Some(all);
+            }
+        }
+    }
+}
+
+/// The board pose of one view under `k` from every ray `k` unprojects.
+fn pose_from_all_rays(
+    k: &Intrinsics,
+    board: &[Vector2<f64>],
+    pixels: &[Vector2<f64>],
+) -> Option<Pose> {
+    let (mut b, mut rays) = (
+        Vec::with_capacity(board.len()),
+        Vec::with_capacity(board.len()),
+    );
+    for (x, uv) in board.iter().zip(pixels) {
+        if let Some(ray) = k.unproject(uv) {
+            b.push(*x);
+            rays.push(ray);
+        }
+    }
+    zhang::pose_from_rays(&b, &rays)
 }
 
 /// The correspondences of camera `camera`'s views in `frames`, in that order.
