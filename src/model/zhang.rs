@@ -205,6 +205,17 @@ pub fn pose_from_homography(h: &Matrix3<f64>, k: &Intrinsics) -> Option<Pose> {
     if c3.z * scale < 0.0 {
         scale = -scale;
     }
+    pose_from_columns(&c1, &c2, &c3, scale)
+}
+
+/// The pose whose rotation is the nearest to (s·c1, s·c2, s·c1 × s·c2) and whose
+/// translation is s·c3: the columns of a board-plane homography, scaled.
+fn pose_from_columns(
+    c1: &Vector3<f64>,
+    c2: &Vector3<f64>,
+    c3: &Vector3<f64>,
+    scale: f64,
+) -> Option<Pose> {
     let r1 = c1 * scale;
     let r2 = c2 * scale;
     let r3 = r1.cross(&r2);
@@ -220,6 +231,7 @@ pub fn pose_from_homography(h: &Matrix3<f64>, k: &Intrinsics) -> Option<Pose> {
     let rot = Rotation3::from_matrix_unchecked(r);
     let t = c3 * scale;
     t.iter()
+        .chain(r.iter())
         .all(|v| v.is_finite())
         .then(|| Pose::from_parts(&rot, &t))
 }
@@ -276,18 +288,7 @@ pub fn pose_from_rays(board: &[Vector2<f64>], rays: &[Vector3<f64>]) -> Option<P
     if ahead < 0.0 {
         scale = -scale;
     }
-    let (r1, r2) = (c1 * scale, c2 * scale);
-    let svd = Matrix3::from_columns(&[r1, r2, r1.cross(&r2)]).svd(true, true);
-    let (u, vt) = (svd.u?, svd.v_t?);
-    let mut r = u * vt;
-    if r.determinant() < 0.0 {
-        let mut u = u;
-        u.column_mut(2).neg_mut();
-        r = u * vt;
-    }
-    let t = c3 * scale;
-    (t.iter().chain(r.iter()).all(|v| v.is_finite()))
-        .then(|| Pose::from_parts(&Rotation3::from_matrix_unchecked(r), &t))
+    pose_from_columns(&c1, &c2, &c3, scale)
 }
 
 /// Intrinsics from homographies: the closed form, else the centred fallback.
