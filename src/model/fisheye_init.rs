@@ -189,31 +189,12 @@ fn repose_outlying_views(k: &Intrinsics, views: &[ViewPoints], poses: &mut [Opti
         if e <= bound {
             continue;
         }
-        if let Some(all) = pose_from_all_rays(k, board, pixels) {
+        if let Some(all) = zhang::pose_from_pixels(k, board, pixels) {
             if view_rms(k, &all, board, pixels) < 0.5 * e {
                 *pose = Some(all);
             }
         }
     }
-}
-
-/// The board pose of one view under `k` from every ray `k` unprojects.
-fn pose_from_all_rays(
-    k: &Intrinsics,
-    board: &[Vector2<f64>],
-    pixels: &[Vector2<f64>],
-) -> Option<Pose> {
-    let (mut b, mut rays) = (
-        Vec::with_capacity(board.len()),
-        Vec::with_capacity(board.len()),
-    );
-    for (x, uv) in board.iter().zip(pixels) {
-        if let Some(ray) = k.unproject(uv) {
-            b.push(*x);
-            rays.push(ray);
-        }
-    }
-    zhang::pose_from_rays(&b, &rays)
 }
 
 /// The correspondences of camera `camera`'s views in `frames`, in that order.

@@ -291,6 +291,26 @@ pub fn pose_from_rays(board: &[Vector2<f64>], rays: &[Vector3<f64>]) -> Option<P
     pose_from_columns(&c1, &c2, &c3, scale)
 }
 
+/// The board pose (camera-from-board) of one view under `k`: [`pose_from_rays`]
+/// on every pixel that `k` unprojects.
+pub fn pose_from_pixels(
+    k: &Intrinsics,
+    board: &[Vector2<f64>],
+    pixels: &[Vector2<f64>],
+) -> Option<Pose> {
+    let (mut b, mut rays) = (
+        Vec::with_capacity(board.len()),
+        Vec::with_capacity(board.len()),
+    );
+    for (x, uv) in board.iter().zip(pixels) {
+        if let Some(ray) = k.unproject(uv) {
+            b.push(*x);
+            rays.push(ray);
+        }
+    }
+    pose_from_rays(&b, &rays)
+}
+
 /// Intrinsics from homographies: the closed form, else the centred fallback.
 pub fn initial_intrinsics(
     hs: &[Matrix3<f64>],

@@ -13,9 +13,9 @@
 use crate::error::Result;
 use crate::model::pose::Pose;
 use crate::model::state::State;
-use crate::model::zhang;
+use crate::model::{fisheye_init, zhang};
 use crate::solver::problem::{Problem, SolverSettings};
-use nalgebra::Vector2;
+use crate::solver::robust;
 
 /// A frame is a suspect when its RMS residual exceeds this many times the median
 /// frame's. Bends that `standard` cannot follow leave frames 2–5 times the median;
@@ -56,9 +56,7 @@ fn stray_frames(rms: &[f64]) -> Vec<usize> {
     if finite.is_empty() {
         return Vec::new();
     }
-    finite.sort_by(f64::total_cmp);
-    let median = finite[finite.len() / 2];
-    let bound = (STRAY_FACTOR * median).max(STRAY_MIN_PX);
+    let bound = (STRAY_FACTOR * robust::median(&mut finite)).max(STRAY_MIN_PX);
     (0..rms.len()).filter(|&j| rms[j] > bound).collect()
 }
 
@@ -71,18 +69,8 @@ fn pose_from_solved_rays(problem: &Problem, state: &State, j: usize) -> Option<P
         seen[o.camera] += 1;
     }
     let k = (0..cameras).max_by_key(|&k| seen[k])?;
-    let (mut board, mut rays) = (Vec::new(), Vec::new());
-    for o in problem.dataset.observations.iter() {
-        if o.frame != j || o.camera != k {
-            continue;
-        }
-        if let Some(ray) = state.intrinsics[k].unproject(&Vector2::new(o.uv[0], o.uv[1])) {
-            let p = problem.dataset.target.nominal(o.corner);
-            board.push(Vector2::new(p.x, p.y));
-            rays.push(ray);
-        }
-    }
-    let camera_k_from_board = zhang::pose_from_rays(&board, &rays)?;
+    let (board, pixels) = fisheye_init::views_of(problem.dataset, k, &[j]).pop()?;
+    let camera_k_from_board = zhang::pose_from_pixels(&state.intrinsics[k], &board, &pixels)?;
     Some(
         state.camera_poses[k]
             .inverse()

@@ -230,7 +230,7 @@ fn robust_sigma(residuals: &[f64]) -> f64 {
 }
 
 /// The median of `v` (sorted in place), the mean of the middle two for an even count.
-fn median(v: &mut [f64]) -> f64 {
+pub(crate) fn median(v: &mut [f64]) -> f64 {
     v.sort_by(f64::total_cmp);
     let n = v.len();
     if n % 2 == 1 {
