@@ -17,7 +17,7 @@
 use deformcal::app::config::{Config, ProtocolConfig};
 use deformcal::app::protocol::prepare;
 use deformcal::model::board::{BoardGeometry, Method};
-use deformcal::model::metrics::mapping_error;
+use deformcal::model::metrics::{mapping_error, mapping_error_rot};
 use deformcal::model::synthetic::{Generator, Preset, Truth};
 use deformcal::solver::problem::SolverSettings;
 use deformcal::{calibrate, Calibration, Dataset, Request};
@@ -504,28 +504,6 @@ fn shuffled(data: &Dataset, seed: u64) -> Dataset {
     out
 }
 
-/// RMS over frames and terms of the true bend's change from one frame to the
-/// next, as Δz at the board's corner, metres: the flex rate a smoothness prior
-/// of that σ expects (what a user would set from how fast the board flexes).
-fn flex_rate(truth: &Truth) -> f64 {
-    let t = truth.target;
-    let x = (t.cols as f64 - 1.0) / 2.0 * t.spacing;
-    let y = (t.rows as f64 - 1.0) / 2.0 * t.spacing;
-    let reach = [x * x, y * y, x * y];
-    let d = &truth.deformations;
-    let sq: f64 = d
-        .windows(2)
-        .map(|w| {
-            let diff = [w[1].a - w[0].a, w[1].b - w[0].b, w[1].c - w[0].c];
-            diff.iter()
-                .zip(reach)
-                .map(|(c, r)| (c * r).powi(2))
-                .sum::<f64>()
-        })
-        .sum();
-    (sq / (3.0 * (d.len() - 1) as f64)).sqrt()
-}
-
 /// The video scenarios: the `flex` preset as stills, as a video (poses moving
 /// smoothly), and as a hand-held video (poses moving, noisier detections, the
 /// board partly out of view and farther away).
@@ -542,10 +520,50 @@ fn video_generator(scenario: &str, seed: u64) -> Generator {
     g
 }
 
+/// One calibration's errors to the truth: mapping error plain and with the
+/// virtual rotation profiled out (px), bend error (m).
+#[derive(Clone, Copy)]
+struct VideoErrors {
+    plain: f64,
+    rot: f64,
+    bend: f64,
+}
+
+fn video_errors(c: &Calibration, truth: &Truth) -> VideoErrors {
+    let cam = &c.dataset.cameras[0];
+    VideoErrors {
+        plain: truth_error(c, truth),
+        rot: mapping_error_rot(
+            &truth.intrinsics[0],
+            &c.state.intrinsics[0],
+            cam.width,
+            cam.height,
+        ),
+        bend: bend_error(c, truth),
+    }
+}
+
+/// Geometric mean change (on → off) in per cent with its standard error, and
+/// how many of the pairs the change lowered.
+fn mean_change(pairs: &[(f64, f64)]) -> String {
+    let logs: Vec<f64> = pairs.iter().map(|(off, on)| (on / off).ln()).collect();
+    let n = logs.len() as f64;
+    let mean = logs.iter().sum::<f64>() / n;
+    let var = logs.iter().map(|l| (l - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
+    let better = logs.iter().filter(|&&l| l < 0.0).count();
+    format!(
+        "{:+.1} % ± {:.1} ({better}/{})",
+        100.0 * (mean.exp() - 1.0),
+        100.0 * mean.exp() * (var / n).sqrt(),
+        logs.len()
+    )
+}
+
 fn video() {
-    println!("## temporal smoothness on `flex` (200 frames, `dynamic`): truth mapping error (px), bend error (mm RMS); smoothness σ = the true flex rate (× SMOOTH_SCALE)");
-    println!("| scenario | seed | order | σ (mm) | mapping off | mapping on | change | bend off | bend on | change |");
-    println!("|---|---|---|---|---|---|---|---|---|---|");
+    println!("## temporal smoothness on `flex` (200 frames, `dynamic`): σ = the true flex rate (× SMOOTH_SCALE), and \"auto\"");
+    println!("per seed: mapping error to the truth (px, plain / rotation-compensated) and bend error (mm RMS), off → σ → auto; the σ \"auto\" chose (mm; - where the order test left the prior off)");
+    println!("| scenario | seed | order | true σ | auto σ | plain off, σ, auto | rot off, σ, auto | bend off, σ, auto |");
+    println!("|---|---|---|---|---|---|---|---|");
     let scale: f64 = std::env::var("SMOOTH_SCALE")
         .ok()
         .and_then(|s| s.parse().ok())
@@ -555,45 +573,62 @@ fn video() {
         .and_then(|s| s.parse().ok())
         .unwrap_or(3);
     let seeds: Vec<u64> = (1..=count).collect();
+    let mut summary = Vec::new();
     for scenario in ["stills", "video", "hand-held"] {
-        let lines: Vec<String> = seeds
-            .par_iter()
-            .flat_map(|&seed| {
-                let (data, truth) = video_generator(scenario, seed).generate();
-                let sigma = flex_rate(&truth) * scale;
-                let mut out = Vec::new();
-                for (label, d) in [("time", data.clone()), ("shuffled", shuffled(&data, seed))] {
+        for label in ["time", "shuffled"] {
+            let rows: Vec<(String, [VideoErrors; 3])> = seeds
+                .par_iter()
+                .map(|&seed| {
+                    let (data, truth) = video_generator(scenario, seed).generate();
+                    let sigma = truth.flex_rate() * scale;
+                    let d = if label == "time" { data } else { shuffled(&data, seed) };
                     let plain = run(&d, Method::Dynamic, &SolverSettings::default());
                     let mut s = SolverSettings::default();
                     s.board.smoothness_sigma_m = Some(sigma);
                     let smooth = run(&d, Method::Dynamic, &s);
-                    if std::env::var("STAGES").is_ok() {
-                        for c in [&plain, &smooth] {
-                            let st: Vec<String> = c
-                                .stages
-                                .iter()
-                                .map(|s| format!("{}:{}it{}", s.method, s.iterations, if s.converged { "" } else { "!" }))
-                                .collect();
-                            eprintln!("{scenario} {seed} {label}: {}", st.join(" "));
-                        }
-                    }
-                    let (m0, m1) = (truth_error(&plain, &truth), truth_error(&smooth, &truth));
-                    let (b0, b1) = (bend_error(&plain, &truth), bend_error(&smooth, &truth));
-                    out.push(format!(
-                        "| {scenario} | {seed} | {label} | {:.3} | {m0:.4} | {m1:.4} | {:+.0} % | {:.4} | {:.4} | {:+.0} % |",
+                    let mut a = SolverSettings::default();
+                    a.board.smoothness_auto = true;
+                    let auto = run(&d, Method::Dynamic, &a);
+                    let auto_sigma = auto
+                        .settings
+                        .board
+                        .smoothness_sigma_m
+                        .map_or("-".to_string(), |v| format!("{:.3}", v * 1e3));
+                    let e = [&plain, &smooth, &auto].map(|c| video_errors(c, &truth));
+                    let line = format!(
+                        "| {scenario} | {seed} | {label} | {:.3} | {auto_sigma} | {:.4}, {:.4}, {:.4} | {:.4}, {:.4}, {:.4} | {:.4}, {:.4}, {:.4} |",
                         sigma * 1e3,
-                        100.0 * (m1 / m0 - 1.0),
-                        b0 * 1e3,
-                        b1 * 1e3,
-                        100.0 * (b1 / b0 - 1.0)
-                    ));
-                }
-                out
-            })
-            .collect();
-        for l in lines {
-            println!("{l}");
+                        e[0].plain, e[1].plain, e[2].plain,
+                        e[0].rot, e[1].rot, e[2].rot,
+                        e[0].bend * 1e3, e[1].bend * 1e3, e[2].bend * 1e3,
+                    );
+                    (line, e)
+                })
+                .collect();
+            for (l, _) in &rows {
+                println!("{l}");
+            }
+            let pairs = |on: usize, f: fn(&VideoErrors) -> f64| -> Vec<(f64, f64)> {
+                rows.iter().map(|(_, e)| (f(&e[0]), f(&e[on]))).collect()
+            };
+            let cells: Vec<String> = [1, 2]
+                .iter()
+                .flat_map(|&on| {
+                    [
+                        mean_change(&pairs(on, |e| e.rot)),
+                        mean_change(&pairs(on, |e| e.plain)),
+                        mean_change(&pairs(on, |e| e.bend)),
+                    ]
+                })
+                .collect();
+            summary.push(format!("| {scenario} | {label} | {} |", cells.join(" | ")));
         }
+    }
+    println!("\nchange on → off, geometric mean ± standard error (seeds lowered / seeds), seeds 1–{count}:");
+    println!("| scenario | order | σ: rot mapping | σ: plain mapping | σ: bend | auto: rot mapping | auto: plain mapping | auto: bend |");
+    println!("|---|---|---|---|---|---|---|---|");
+    for l in summary {
+        println!("{l}");
     }
 }
 

@@ -227,6 +227,54 @@ fn temporal_smoothness_helps_a_video_and_not_shuffled_stills() {
         (md - mc).abs() < 0.05 * mc,
         "shuffled frames: under 5% change"
     );
+    // Out of time order the frames' bends fail the order test: no prior at all.
+    assert_eq!(d.settings.board.smoothness_sigma_m, None);
+    assert!(
+        d.warnings.iter().any(|w| w.contains("not in time order")),
+        "{:?}",
+        d.warnings
+    );
+    assert!(b.warnings.iter().all(|w| !w.contains("bend_smoothness")));
+}
+
+#[test]
+fn auto_smoothness_reads_the_flex_rate_in_time_order_and_stays_off_shuffled() {
+    let mut auto = SolverSettings::default();
+    auto.board.smoothness_auto = true;
+    for (seed, video) in [(1, false), (2, true)] {
+        let mut g = Generator::new(Preset::Flex, None, seed);
+        g.video = video;
+        let (data, truth) = g.generate();
+        let plain = run(&data, Method::Dynamic, &SolverSettings::default());
+        let with = run(&data, Method::Dynamic, &auto);
+        let sigma = with
+            .settings
+            .board
+            .smoothness_sigma_m
+            .expect("an estimated σ");
+        let rate = truth.flex_rate();
+        let (b0, b1) = (bend_error(&plain, &truth), bend_error(&with, &truth));
+        println!(
+            "seed {seed}: σ {:.3} mm (true flex rate {:.3}), bend error {:.4} → {:.4} mm",
+            sigma * 1e3,
+            rate * 1e3,
+            b0 * 1e3,
+            b1 * 1e3
+        );
+        // The estimate includes what each frame's bend estimate varies beyond its
+        // noise given the intrinsics; 1.6–2.7× the flex rate on these sets.
+        assert!(
+            (0.7 * rate..3.5 * rate).contains(&sigma),
+            "σ {sigma} against {rate}"
+        );
+        assert!(b1 < 0.85 * b0, "bend error {b0} → {b1}");
+        let still = shuffled(&data);
+        let off = run(&still, Method::Dynamic, &SolverSettings::default());
+        let tried = run(&still, Method::Dynamic, &auto);
+        assert_eq!(tried.settings.board.smoothness_sigma_m, None);
+        let (m0, m1) = (truth_error(&off, &truth), truth_error(&tried, &truth));
+        assert!((m1 - m0).abs() < 0.01 * m0, "shuffled: {m0} → {m1}");
+    }
 }
 
 #[test]
@@ -329,6 +377,12 @@ fn config_keys_select_orders_priors_and_geometry() {
     let c = parse("bend_prior_mm = 2\n").unwrap();
     let s = SolverSettings::from(&c.calibration);
     assert!(!s.board.bend_sigma_auto && s.board.bend_sigma_m == Some(2e-3));
+    let c = parse("bend_smoothness = \"auto\"\n").unwrap();
+    let s = SolverSettings::from(&c.calibration);
+    assert!(s.board.smoothness_auto && s.board.smoothness_sigma_m.is_none() && s.board.any());
+    let c = parse("bend_smoothness = 0.2\n").unwrap();
+    let s = SolverSettings::from(&c.calibration);
+    assert!(!s.board.smoothness_auto && s.board.smoothness_sigma_m == Some(0.2e-3));
     let c = parse("bend_order = \"auto\"\n").unwrap();
     assert_eq!(c.calibration.bend_order, BendOrder::Auto);
     assert_eq!(c.calibration.method, MethodChoice::Auto);
@@ -362,6 +416,14 @@ fn config_keys_select_orders_priors_and_geometry() {
             "static_prior_mm must be a number",
         ),
         ("bend_prior_mm = [1]\n", "bend_prior_mm must be a number"),
+        (
+            "bend_smoothness = \"smooth\"\n",
+            "bend_smoothness must be a number of millimetres or \"auto\"",
+        ),
+        (
+            "bend_smoothness = -0.1\n",
+            "bend_smoothness must be a positive",
+        ),
     ] {
         let e = parse(bad).unwrap_err().to_string();
         assert!(e.contains(says), "{bad}: {e}");

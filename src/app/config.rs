@@ -56,8 +56,9 @@ pub struct CalibrationConfig {
     #[serde(deserialize_with = "bend_prior_mm")]
     pub bend_prior_mm: Option<PriorSigma>,
     /// 1σ of each bend term's change between consecutive frames, mm at the
-    /// board's corner: temporal smoothness for video (off by default).
-    pub bend_smoothness: Option<f64>,
+    /// board's corner: temporal smoothness for video (off by default), or "auto".
+    #[serde(deserialize_with = "bend_smoothness")]
+    pub bend_smoothness: Option<PriorSigma>,
     /// Frames bent more than this (mm, largest |Δz| over the corners) are flagged.
     pub max_bend_mm: f64,
     /// 1σ of the zero-mean prior on the lens parameters the data leave nearly
@@ -103,7 +104,7 @@ impl TryFrom<NumberOrName<i64>> for BendOrder {
     }
 }
 
-/// `[calibration] static_prior_mm` and `bend_prior_mm`: a prior's σ in
+/// `[calibration] static_prior_mm`, `bend_prior_mm` and `bend_smoothness`: a prior's σ in
 /// millimetres, or "auto" (estimated from the data, `solver::auto_prior`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum PriorSigma {
@@ -160,6 +161,12 @@ fn bend_prior_mm<'de, D: serde::Deserializer<'de>>(
     d: D,
 ) -> std::result::Result<Option<PriorSigma>, D::Error> {
     PriorSigma::read(d, "bend_prior_mm")
+}
+
+fn bend_smoothness<'de, D: serde::Deserializer<'de>>(
+    d: D,
+) -> std::result::Result<Option<PriorSigma>, D::Error> {
+    PriorSigma::read(d, "bend_smoothness")
 }
 
 /// Default of `max_bend_mm`.
@@ -252,7 +259,8 @@ impl From<&CalibrationConfig> for SolverSettings {
                 static_sigma_auto: c.static_prior_mm == Some(PriorSigma::Auto),
                 bend_sigma_m: c.bend_prior_mm.and_then(PriorSigma::mm).map(|v| v * 1e-3),
                 bend_sigma_auto: c.bend_prior_mm == Some(PriorSigma::Auto),
-                smoothness_sigma_m: c.bend_smoothness.map(|v| v * 1e-3),
+                smoothness_sigma_m: c.bend_smoothness.and_then(PriorSigma::mm).map(|v| v * 1e-3),
+                smoothness_auto: c.bend_smoothness == Some(PriorSigma::Auto),
                 geometry: c.geometry.clone(),
                 noise_px: c.detector_noise_px,
                 max_bend_m: Some(c.max_bend_mm * 1e-3),
@@ -731,7 +739,10 @@ impl Checker<'_> {
                 c.static_prior_mm.and_then(PriorSigma::mm),
             ),
             ("bend_prior_mm", c.bend_prior_mm.and_then(PriorSigma::mm)),
-            ("bend_smoothness", c.bend_smoothness),
+            (
+                "bend_smoothness",
+                c.bend_smoothness.and_then(PriorSigma::mm),
+            ),
             ("max_bend_mm", Some(c.max_bend_mm)),
         ] {
             if let Some(v) = v {

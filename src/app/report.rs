@@ -295,6 +295,18 @@ fn write_board(s: &mut String, c: &Calibration) {
                 sigma * 1e3
             );
         }
+        if let Some(sigma) = board.smoothness_sigma_m {
+            let from = if board.smoothness_auto {
+                "from the frames' own bends (bend_smoothness = \"auto\")"
+            } else {
+                "as configured; the frames' bends follow their order"
+            };
+            let _ = writeln!(
+                s,
+                "  temporal smoothness σ {:.3} mm per term and frame, {from}",
+                sigma * 1e3
+            );
+        }
     }
     if c.method.has_correction() {
         let max = c

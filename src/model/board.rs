@@ -270,6 +270,9 @@ pub struct BoardPriors {
     /// 1σ of each bend term's change from one frame to the next, as Δz at the
     /// board's corner, metres (`bend_smoothness`).
     pub smoothness_sigma_m: Option<f64>,
+    /// `bend_smoothness = "auto"`: the smoothness prior's σ is estimated from
+    /// the frames' own bends (empirical Bayes).
+    pub smoothness_auto: bool,
     /// A measured board used as the nominal one (`[target] geometry`).
     pub geometry: Option<std::sync::Arc<BoardGeometry>>,
     /// The pixel noise σ the priors are weighted by; the pipeline estimates it
@@ -291,6 +294,7 @@ impl BoardPriors {
             || self.bend_sigma_m.is_some()
             || self.bend_sigma_auto
             || self.smoothness_sigma_m.is_some()
+            || self.smoothness_auto
             || self.geometry.is_some()
     }
 

@@ -305,6 +305,28 @@ pub struct Truth {
 }
 
 impl Truth {
+    /// RMS over consecutive frames and the paraboloid's terms of the true bend's
+    /// change from one frame to the next, as Δz at the board's corner, metres:
+    /// the flex rate that `bend_smoothness` describes (0 for fewer than two frames).
+    pub fn flex_rate(&self) -> f64 {
+        let reach = crate::model::board::bend_reach(&self.target, 3);
+        let d = &self.deformations;
+        if d.len() < 2 {
+            return 0.0;
+        }
+        let sq: f64 = d
+            .windows(2)
+            .map(|w| {
+                [w[1].a - w[0].a, w[1].b - w[0].b, w[1].c - w[0].c]
+                    .iter()
+                    .zip(&reach)
+                    .map(|(c, r)| (c * r).powi(2))
+                    .sum::<f64>()
+            })
+            .sum();
+        (sq / (3.0 * (d.len() - 1) as f64)).sqrt()
+    }
+
     /// The true 3D board point of corner `i` in frame `j`.
     pub fn board_point(&self, i: usize, j: usize) -> Vector3<f64> {
         let n = self.target.nominal(i);

@@ -1,5 +1,7 @@
 //! The board priors' σ from the data (`static_prior_mm = "auto"`,
-//! `bend_prior_mm = "auto"`; empirical Bayes).
+//! `bend_prior_mm = "auto"`, `bend_smoothness = "auto"`; empirical Bayes), and
+//! whether the frames' bends follow their order at all (the test that lets the
+//! smoothness prior act only on a video in time order).
 //!
 //! A fixed prior σ either does nothing (far above the values' estimation noise)
 //! or biases real deformations (below their size). The estimates' own spread
@@ -15,6 +17,8 @@ use crate::model::state::{State, POSE_PARAMS};
 use crate::solver::covariance::unit_correction_information;
 use crate::solver::problem::{Problem, SolverSettings};
 use nalgebra::{DMatrix, DVector};
+use rand::seq::SliceRandom;
+use rand::SeedableRng;
 
 /// The smallest bend σ the estimate returns, metres: the prior never pins a
 /// bend tighter than a hundredth of a millimetre at the board's corner.
@@ -211,4 +215,236 @@ fn frame_information(
         }
     }
     Some(info)
+}
+
+/// Each frame's bend terms as Δz at the board's corner, metres, in frame order;
+/// `None` for a method without per-frame bends.
+pub fn frame_bends_at_reach(problem: &Problem, state: &State) -> Option<Vec<Vec<f64>>> {
+    let layout = problem.layout();
+    let stride = layout.frame_stride;
+    let terms = stride.checked_sub(POSE_PARAMS).filter(|&t| t > 0)?;
+    let values = layout.pack(state)?;
+    let reach = bend_reach(&problem.dataset.target, terms);
+    Some(
+        (0..layout.num_frames)
+            .map(|j| {
+                let at = layout.frames + j * stride + POSE_PARAMS;
+                values[at..at + terms]
+                    .iter()
+                    .zip(&reach)
+                    .map(|(c, r)| c * r)
+                    .collect()
+            })
+            .collect(),
+    )
+}
+
+/// Whether a sequence of per-frame bends follows its order: the mean square
+/// change from one frame to the next, against the frames in random orders.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OrderTest {
+    /// Mean square change between consecutive frames over its mean over random
+    /// pairs: near 1 for frames in no particular order, near 0 for a smooth video.
+    pub ratio: f64,
+    /// The share of random orders whose consecutive changes are as small
+    /// (a permutation test, [`ORDER_PERMUTATIONS`] orders).
+    pub p_value: f64,
+}
+
+/// Random orders the permutation test draws (seeded: the same data, the same verdict).
+pub const ORDER_PERMUTATIONS: usize = 999;
+
+/// The frames count as in time order below this p-value.
+pub const ORDER_P_VALUE: f64 = 0.01;
+
+impl OrderTest {
+    /// Whether the bends change less from frame to frame than chance allows.
+    pub fn in_order(&self) -> bool {
+        self.p_value < ORDER_P_VALUE
+    }
+}
+
+/// Tests `bends` (one vector of terms per frame, in frame order); `None` for
+/// fewer than three frames or bends that do not vary at all.
+///
+/// A bend estimated per frame is the true bend plus that frame's estimation
+/// error. In time order a slowly flexing board's consecutive bends differ by
+/// the flex of one frame plus the two errors; in any other order, by the
+/// bends' whole spread. The test needs no noise model: noisy bends only bring
+/// the ratio towards 1, never below it. Shuffled stills give ratios of
+/// 0.91–1.06 on the `flex` preset, the same frames in time order 0.01–0.37
+/// (the hand-held video's noisy bends the highest).
+pub fn order_test(bends: &[Vec<f64>]) -> Option<OrderTest> {
+    let n = bends.len();
+    if n < 3 {
+        return None;
+    }
+    let changes = |order: &[usize]| -> f64 {
+        order
+            .windows(2)
+            .map(|w| {
+                bends[w[1]]
+                    .iter()
+                    .zip(&bends[w[0]])
+                    .map(|(a, b)| (a - b) * (a - b))
+                    .sum::<f64>()
+            })
+            .sum()
+    };
+    let terms = bends[0].len();
+    let spread: f64 = (0..terms)
+        .map(|q| {
+            let mean = bends.iter().map(|b| b[q]).sum::<f64>() / n as f64;
+            bends.iter().map(|b| (b[q] - mean).powi(2)).sum::<f64>() / (n - 1) as f64
+        })
+        .sum();
+    if !(spread > 0.0 && spread.is_finite()) {
+        return None;
+    }
+    let mut order: Vec<usize> = (0..n).collect();
+    let observed = changes(&order);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+    let mut as_small = 0;
+    for _ in 0..ORDER_PERMUTATIONS {
+        order.shuffle(&mut rng);
+        if changes(&order) <= observed {
+            as_small += 1;
+        }
+    }
+    Some(OrderTest {
+        // A random pair of frames differs by twice the spread on average.
+        ratio: observed / (n - 1) as f64 / (2.0 * spread),
+        p_value: (1 + as_small) as f64 / (1 + ORDER_PERMUTATIONS) as f64,
+    })
+}
+
+/// The smoothness prior's σ (each term's change from frame j−1 to j, as Δz at
+/// the board's corner) from the frames' own bends (a solve without the prior):
+/// the moments of [`excess_sigma`] over the consecutive differences, each with
+/// the variance of its two frames' bend estimates (given the intrinsics, as
+/// for the bend prior). What the changes show beyond that noise is the flex
+/// per frame, which is what the prior's σ means. Where the noise drowns it
+/// (a far, noisy board), the estimate is not allowed below its own standard
+/// error: a σ the data cannot tell from zero would tie frames the data do not.
+pub fn estimate_smoothness_sigma(
+    problem: &Problem,
+    state: &State,
+    settings: &SolverSettings,
+    noise_px: f64,
+) -> Option<Estimate> {
+    let layout = problem.layout();
+    let terms = layout
+        .frame_stride
+        .checked_sub(POSE_PARAMS)
+        .filter(|&t| t > 0)?;
+    let bends = frame_bends_at_reach(problem, state)?;
+    let reach = bend_reach(&problem.dataset.target, terms);
+    let variances: Vec<Option<Vec<f64>>> = frame_information(problem, state, settings)?
+        .into_iter()
+        .map(|info| {
+            let cov = info.try_inverse()?;
+            Some(
+                reach
+                    .iter()
+                    .enumerate()
+                    .map(|(i, r)| {
+                        noise_px * noise_px * cov[(POSE_PARAMS + i, POSE_PARAMS + i)] * r * r
+                    })
+                    .collect(),
+            )
+        })
+        .collect();
+    let (mut quadratic, mut trace, mut count) = (0.0, 0.0, 0);
+    for j in 1..bends.len() {
+        let (Some(a), Some(b)) = (&variances[j - 1], &variances[j]) else {
+            continue;
+        };
+        for q in 0..terms {
+            let v = a[q] + b[q];
+            let d = bends[j][q] - bends[j - 1][q];
+            if v.is_finite() && v > 0.0 {
+                quadratic += d * d / v;
+                trace += 1.0 / v;
+                count += 1;
+            }
+        }
+    }
+    let estimate = excess_sigma(quadratic, trace, count, MIN_BEND_SIGMA_M)?;
+    // The moment estimate of σ² has a standard error of √(2n) / tr P near σ = 0.
+    let resolvable = ((2.0 * count as f64).sqrt() / trace).sqrt();
+    Some(Estimate {
+        sigma: estimate.sigma.max(resolvable),
+        values: count,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand_distr::{Distribution, Normal};
+
+    /// A random walk of three terms (steps of σ) seen with estimation noise.
+    fn walk(n: usize, step: f64, noise: f64, seed: u64) -> Vec<Vec<f64>> {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let (s, e) = (
+            Normal::new(0.0, step).unwrap(),
+            Normal::new(0.0, noise).unwrap(),
+        );
+        let mut truth = [0.0; 3];
+        (0..n)
+            .map(|_| {
+                truth
+                    .iter_mut()
+                    .map(|t| {
+                        *t += s.sample(&mut rng);
+                        *t + e.sample(&mut rng)
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_walk_in_order_passes_and_shuffled_fails() {
+        for seed in 1..=5 {
+            // Noise three times the step: each bend alone is mostly noise.
+            let bends = walk(200, 1.0, 3.0, seed);
+            let t = order_test(&bends).unwrap();
+            assert!(t.in_order() && t.ratio < 0.5, "seed {seed}: {t:?}");
+            let mut shuffled = bends.clone();
+            shuffled.shuffle(&mut rand_chacha::ChaCha8Rng::seed_from_u64(seed + 100));
+            let t = order_test(&shuffled).unwrap();
+            assert!(
+                !t.in_order() && (0.7..1.3).contains(&t.ratio),
+                "seed {seed} shuffled: {t:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn the_ratio_is_what_the_walk_and_noise_predict() {
+        // Consecutive frames differ by step² + 2 noise² per term on average.
+        let (n, step, noise) = (4000, 0.5, 1.0);
+        let bends = walk(n, step, noise, 7);
+        let t = order_test(&bends).unwrap();
+        let spread: f64 = (0..3)
+            .map(|q| {
+                let m = bends.iter().map(|b| b[q]).sum::<f64>() / n as f64;
+                bends.iter().map(|b| (b[q] - m).powi(2)).sum::<f64>() / (n - 1) as f64
+            })
+            .sum::<f64>()
+            / 3.0;
+        let expected = (step * step + 2.0 * noise * noise) / (2.0 * spread);
+        assert!(
+            (t.ratio / expected - 1.0).abs() < 0.1,
+            "{} vs {expected}",
+            t.ratio
+        );
+    }
+
+    #[test]
+    fn too_few_or_constant_frames_give_no_test() {
+        assert!(order_test(&walk(2, 1.0, 0.0, 1)).is_none());
+        assert!(order_test(&vec![vec![1.0, 2.0, 3.0]; 10]).is_none());
+    }
 }

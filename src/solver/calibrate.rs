@@ -13,7 +13,7 @@ use crate::solver::problem::{
     choose_gauge, rmse, underobserved_corners, Hold, Problem, SolveReport, SolverSettings, State,
     WarmUp,
 };
-use crate::solver::{repose, robust};
+use crate::solver::{auto_prior, repose, robust};
 use nalgebra::{Matrix3, Vector2};
 use std::collections::HashMap;
 use std::time::Instant;
@@ -614,11 +614,63 @@ fn warm_start_settings(request: &Request, dataset: &Dataset) -> SolverSettings {
     }
 }
 
+/// Decides, from the frames' own bends at `state`, whether the smoothness prior
+/// acts: only where those bends follow the frame order (`auto_prior::order_test`;
+/// shuffled stills or a board that does not flex smoothly get no prior, whatever
+/// σ was asked for), and with the σ they show for `bend_smoothness = "auto"`.
+/// The outcome is written into `request` (the σ, or none), so later solves and
+/// the summary use it; each dropped prior is a warning.
+fn resolve_smoothness(
+    problem: &Problem,
+    state: &State,
+    own: &SolverSettings,
+    request: &mut Request,
+    warnings: &mut Vec<String>,
+) {
+    let board = &mut request.settings.board;
+    let key = "bend_smoothness";
+    let test =
+        auto_prior::frame_bends_at_reach(problem, state).and_then(|b| auto_prior::order_test(&b));
+    let Some(test) = test else {
+        if board.smoothness_auto {
+            warnings.push(format!(
+                "{key} = \"auto\": the frames' bends give nothing to compare (fewer than three frames, or no bend); the prior is left off"
+            ));
+            board.smoothness_sigma_m = None;
+            board.smoothness_auto = false;
+        }
+        return;
+    };
+    if !test.in_order() {
+        warnings.push(format!(
+            "{key}: consecutive frames' bends differ about as much as random pairs of frames do \
+             (ratio {:.2}, p = {:.2}): the frames are not in time order, or the board does not flex smoothly; \
+             the smoothness prior is left off",
+            test.ratio, test.p_value
+        ));
+        board.smoothness_sigma_m = None;
+        board.smoothness_auto = false;
+        return;
+    }
+    if board.smoothness_auto && board.smoothness_sigma_m.is_none() {
+        let noise = board.noise_px.unwrap_or(f64::NAN);
+        match auto_prior::estimate_smoothness_sigma(problem, state, own, noise) {
+            Some(e) => board.smoothness_sigma_m = Some(e.sigma),
+            None => {
+                warnings.push(format!(
+                    "{key} = \"auto\": the solve gives no estimate of the prior's σ; the prior is left off"
+                ));
+                board.smoothness_auto = false;
+            }
+        }
+    }
+}
+
 /// Solves the requested (non-`standard`) method; returns its gauge, frozen corners, residuals.
 fn solve_method(
     dataset: &Dataset,
     state: &mut State,
-    request: &Request,
+    request: &mut Request,
     stages: &mut Vec<Stage>,
     warnings: &mut Vec<String>,
 ) -> Result<Solved> {
@@ -644,7 +696,10 @@ fn solve_method(
         s
     };
     let mut settings = fresh(request.settings.clone());
-    if request.settings.board.smoothness_sigma_m.is_some() {
+    let board = &request.settings.board;
+    if request.method.has_paraboloid()
+        && (board.smoothness_sigma_m.is_some() || board.smoothness_auto)
+    {
         // The smoothness prior is robust, so not convex: started from unbent
         // frames (all alike, in its quadratic core) it holds bends the data want
         // apart. Each frame's own bend first, then the frames tied.
@@ -653,6 +708,7 @@ fn solve_method(
         let report = problem.solve(state, &own)?;
         robust::check_stage(request.method, &report, true)?;
         stages.push(Stage::new(request.method, &report));
+        resolve_smoothness(&problem, state, &own, request, warnings);
         settings = request.settings.clone();
     }
     let report = problem.solve(state, &settings)?;
@@ -798,7 +854,13 @@ pub fn fit(dataset: &Dataset, request: &Request) -> Result<Calibration> {
         };
         (Vec::new(), Vec::new(), residuals)
     } else {
-        let solved = solve_method(&dataset, &mut state, &request, &mut stages, &mut warnings)?;
+        let solved = solve_method(
+            &dataset,
+            &mut state,
+            &mut request,
+            &mut stages,
+            &mut warnings,
+        )?;
         with_auto_priors(
             &dataset,
             &mut state,
