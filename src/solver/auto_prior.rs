@@ -148,29 +148,67 @@ pub fn estimate_bend_sigma(
     settings: &SolverSettings,
     noise_px: f64,
 ) -> Option<Estimate> {
-    let layout = problem.layout();
-    let stride = layout.frame_stride;
-    let terms = stride.checked_sub(POSE_PARAMS).filter(|&t| t > 0)?;
-    let info = frame_information(problem, state, settings)?;
-    let values = layout.pack(state)?;
+    let f = bends_with_variances(problem, state, settings, noise_px)?;
+    let pairs =
+        f.dz.iter()
+            .zip(&f.variance)
+            .filter_map(|(dz, var)| Some(dz.iter().copied().zip(var.as_ref()?.iter().copied())))
+            .flatten();
+    excess_sigma_of(pairs, MIN_BEND_SIGMA_M).map(|(e, _)| e)
+}
+
+/// Each frame's bend terms as Δz at the board's corner ([`frame_bends_at_reach`])
+/// and their estimation variances, m², given the intrinsics (`None` for a frame
+/// whose pose and bend its own observations do not determine).
+fn bends_with_variances(
+    problem: &Problem,
+    state: &State,
+    settings: &SolverSettings,
+    noise_px: f64,
+) -> Option<FrameBends> {
+    let bends = frame_bends_at_reach(problem, state)?;
+    let terms = bends.first().map_or(0, Vec::len);
     let reach = bend_reach(&problem.dataset.target, terms);
+    let variances = frame_information(problem, state, settings)?
+        .into_iter()
+        .map(|info| {
+            let cov = info.try_inverse()?;
+            Some(
+                reach
+                    .iter()
+                    .enumerate()
+                    .map(|(i, r)| {
+                        let slot = POSE_PARAMS + i;
+                        noise_px * noise_px * cov[(slot, slot)] * r * r
+                    })
+                    .collect(),
+            )
+        })
+        .collect();
+    Some(FrameBends {
+        dz: bends,
+        variance: variances,
+    })
+}
+
+/// Per frame, its bend terms as Δz at the board's corner and their variances.
+struct FrameBends {
+    dz: Vec<Vec<f64>>,
+    variance: Vec<Option<Vec<f64>>>,
+}
+
+/// [`excess_sigma`] over estimates given as (value, variance) pairs, skipping
+/// those without a finite positive variance; with tr P, Σ 1/variance.
+fn excess_sigma_of(pairs: impl Iterator<Item = (f64, f64)>, floor: f64) -> Option<(Estimate, f64)> {
     let (mut quadratic, mut trace, mut count) = (0.0, 0.0, 0);
-    for (j, info) in info.into_iter().enumerate() {
-        let Some(cov) = info.try_inverse() else {
-            continue;
-        };
-        for (i, r) in reach.iter().enumerate() {
-            let slot = POSE_PARAMS + i;
-            let dz = values[layout.frames + j * stride + slot] * r;
-            let variance = noise_px * noise_px * cov[(slot, slot)] * r * r;
-            if variance.is_finite() && variance > 0.0 {
-                quadratic += dz * dz / variance;
-                trace += 1.0 / variance;
-                count += 1;
-            }
+    for (value, variance) in pairs {
+        if variance.is_finite() && variance > 0.0 {
+            quadratic += value * value / variance;
+            trace += 1.0 / variance;
+            count += 1;
         }
     }
-    excess_sigma(quadratic, trace, count, MIN_BEND_SIGMA_M)
+    Some((excess_sigma(quadratic, trace, count, floor)?, trace))
 }
 
 /// Per frame, JᵀJ of its pose and bend values from its own observations' rows
@@ -329,49 +367,21 @@ pub fn estimate_smoothness_sigma(
     settings: &SolverSettings,
     noise_px: f64,
 ) -> Option<Estimate> {
-    let layout = problem.layout();
-    let terms = layout
-        .frame_stride
-        .checked_sub(POSE_PARAMS)
-        .filter(|&t| t > 0)?;
-    let bends = frame_bends_at_reach(problem, state)?;
-    let reach = bend_reach(&problem.dataset.target, terms);
-    let variances: Vec<Option<Vec<f64>>> = frame_information(problem, state, settings)?
-        .into_iter()
-        .map(|info| {
-            let cov = info.try_inverse()?;
-            Some(
-                reach
-                    .iter()
-                    .enumerate()
-                    .map(|(i, r)| {
-                        noise_px * noise_px * cov[(POSE_PARAMS + i, POSE_PARAMS + i)] * r * r
-                    })
-                    .collect(),
-            )
+    let f = bends_with_variances(problem, state, settings, noise_px)?;
+    // The change of each term from frame j−1 to j, with the two frames' variance.
+    let dz = &f.dz;
+    let pairs = (1..dz.len())
+        .filter_map(|j| {
+            let (a, b) = (f.variance[j - 1].as_ref()?, f.variance[j].as_ref()?);
+            Some((0..a.len()).map(move |q| (dz[j][q] - dz[j - 1][q], a[q] + b[q])))
         })
-        .collect();
-    let (mut quadratic, mut trace, mut count) = (0.0, 0.0, 0);
-    for j in 1..bends.len() {
-        let (Some(a), Some(b)) = (&variances[j - 1], &variances[j]) else {
-            continue;
-        };
-        for q in 0..terms {
-            let v = a[q] + b[q];
-            let d = bends[j][q] - bends[j - 1][q];
-            if v.is_finite() && v > 0.0 {
-                quadratic += d * d / v;
-                trace += 1.0 / v;
-                count += 1;
-            }
-        }
-    }
-    let estimate = excess_sigma(quadratic, trace, count, MIN_BEND_SIGMA_M)?;
+        .flatten();
+    let (estimate, trace) = excess_sigma_of(pairs, MIN_BEND_SIGMA_M)?;
     // The moment estimate of σ² has a standard error of √(2n) / tr P near σ = 0.
-    let resolvable = ((2.0 * count as f64).sqrt() / trace).sqrt();
+    let resolvable = ((2.0 * estimate.values as f64).sqrt() / trace).sqrt();
     Some(Estimate {
         sigma: estimate.sigma.max(resolvable),
-        values: count,
+        ..estimate
     })
 }
 
