@@ -238,6 +238,30 @@ fn temporal_smoothness_helps_a_video_and_not_shuffled_stills() {
 }
 
 #[test]
+fn smoothness_works_beside_an_auto_bend_prior() {
+    // The bend prior's σ is estimated after a first solve and the method solved
+    // again from its own result, where a stage may rightly take no step: that
+    // once failed as "no progress from its start".
+    let mut g = Generator::new(Preset::Flex, None, 1);
+    g.video = true;
+    let (data, truth) = g.generate();
+    let mut bend_auto = SolverSettings::default();
+    bend_auto.board.bend_sigma_auto = true;
+    let alone = run(&data, Method::Dynamic, &bend_auto);
+    for smoothness in [Some(0.13e-3), None] {
+        let mut both = bend_auto.clone();
+        both.board.smoothness_sigma_m = smoothness;
+        both.board.smoothness_auto = smoothness.is_none();
+        let c = run(&data, Method::Dynamic, &both);
+        assert!(c.settings.board.bend_sigma_m.is_some());
+        assert!(c.settings.board.smoothness_sigma_m.is_some());
+        let (b0, b1) = (bend_error(&alone, &truth), bend_error(&c, &truth));
+        println!("{smoothness:?}: bend error {b0:.6} → {b1:.6} m");
+        assert!(b1 < 0.9 * b0, "bend error {b0} → {b1}");
+    }
+}
+
+#[test]
 fn auto_smoothness_reads_the_flex_rate_in_time_order_and_stays_off_shuffled() {
     let mut auto = SolverSettings::default();
     auto.board.smoothness_auto = true;

@@ -566,7 +566,7 @@ fn with_auto_prior(
 ) -> Result<Solved> {
     let saved = state.clone();
     prior.set(&mut request.settings.board, Some(estimate.sigma));
-    let held = solve_method(dataset, state, request, stages, warnings)?;
+    let held = solve_method(dataset, state, request, false, stages, warnings)?;
     let sum_sq = |r: &[f64]| -> f64 {
         crate::model::trust::weighted(dataset, r)
             .iter()
@@ -667,10 +667,14 @@ fn resolve_smoothness(
 }
 
 /// Solves the requested (non-`standard`) method; returns its gauge, frozen corners, residuals.
+/// `from_standard`: `state` is `standard`'s result, never the method's optimum,
+/// so a stage that takes no step has failed; a repeat (with an estimated prior)
+/// starts from the method's own result and may stop at once.
 fn solve_method(
     dataset: &Dataset,
     state: &mut State,
     request: &mut Request,
+    from_standard: bool,
     stages: &mut Vec<Stage>,
     warnings: &mut Vec<String>,
 ) -> Result<Solved> {
@@ -696,6 +700,7 @@ fn solve_method(
         s
     };
     let mut settings = fresh(request.settings.clone());
+    let mut first_stage = from_standard;
     let board = &request.settings.board;
     if request.method.has_paraboloid()
         && (board.smoothness_sigma_m.is_some() || board.smoothness_auto)
@@ -706,13 +711,15 @@ fn solve_method(
         let mut own = fresh(warm_start_settings(request, problem.dataset));
         own.board.smoothness_sigma_m = None;
         let report = problem.solve(state, &own)?;
-        robust::check_stage(request.method, &report, true)?;
+        robust::check_stage(request.method, &report, first_stage)?;
         stages.push(Stage::new(request.method, &report));
         resolve_smoothness(&problem, state, &own, request, warnings);
         settings = request.settings.clone();
+        // Tying frames whose own bends already agree may take no step.
+        first_stage = false;
     }
     let report = problem.solve(state, &settings)?;
-    robust::check_stage(request.method, &report, true)?;
+    robust::check_stage(request.method, &report, first_stage)?;
     stages.push(Stage::new(request.method, &report));
     Ok((gauge, frozen, report.residuals))
 }
@@ -858,6 +865,7 @@ pub fn fit(dataset: &Dataset, request: &Request) -> Result<Calibration> {
             &dataset,
             &mut state,
             &mut request,
+            true,
             &mut stages,
             &mut warnings,
         )?;
