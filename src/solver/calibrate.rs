@@ -713,7 +713,11 @@ fn solve_method(
         let report = problem.solve(state, &own)?;
         robust::check_stage(request.method, &report, first_stage)?;
         stages.push(Stage::new(request.method, &report));
-        resolve_smoothness(&problem, state, &own, request, warnings);
+        // A repeat keeps the first call's verdict and σ: the same order test
+        // again is work twice over, and a second verdict could differ.
+        if from_standard {
+            resolve_smoothness(&problem, state, &own, request, warnings);
+        }
         settings = request.settings.clone();
         // Tying frames whose own bends already agree may take no step.
         first_stage = false;
