@@ -3,7 +3,7 @@
 use crate::error::{Error, Result};
 use crate::model::lens::Intrinsics;
 use crate::model::pose::Pose;
-use nalgebra::{DMatrix, Matrix3, Rotation3, Vector2, Vector3};
+use nalgebra::{DMatrix, Matrix3, Rotation3, SMatrix, SVector, Vector2, Vector3};
 
 /// Hartley normalisation: centroid at the origin, mean distance √2.
 fn normalisation(points: &[Vector2<f64>]) -> Matrix3<f64> {
@@ -26,27 +26,20 @@ pub fn homography(board: &[Vector2<f64>], image: &[Vector2<f64>]) -> Option<Matr
     }
     let tb = normalisation(board);
     let ti = normalisation(image);
-    let mut a = DMatrix::<f64>::zeros(2 * board.len(), 9);
-    for (k, (b, i)) in board.iter().zip(image).enumerate() {
+    // AᵀA accumulated row by row: the 2n × 9 matrix A itself is never needed.
+    let mut ata = SMatrix::<f64, 9, 9>::zeros();
+    for (b, i) in board.iter().zip(image) {
         let b = apply(&tb, b);
         let i = apply(&ti, i);
-        let r = 2 * k;
-        a.row_mut(r)
-            .copy_from_slice(&[-b.x, -b.y, -1.0, 0.0, 0.0, 0.0, i.x * b.x, i.x * b.y, i.x]);
-        a.row_mut(r + 1).copy_from_slice(&[
-            0.0,
-            0.0,
-            0.0,
-            -b.x,
-            -b.y,
-            -1.0,
-            i.y * b.x,
-            i.y * b.y,
-            i.y,
-        ]);
+        let rows = [
+            SVector::<f64, 9>::from([-b.x, -b.y, -1.0, 0.0, 0.0, 0.0, i.x * b.x, i.x * b.y, i.x]),
+            SVector::<f64, 9>::from([0.0, 0.0, 0.0, -b.x, -b.y, -1.0, i.y * b.x, i.y * b.y, i.y]),
+        ];
+        for r in &rows {
+            ata.syger(1.0, r, r, 1.0);
+        }
     }
     // The null vector of A is the eigenvector of AᵀA with the smallest eigenvalue.
-    let ata = a.transpose() * &a;
     let eig = ata.symmetric_eigen();
     let (imin, _) = eig
         .eigenvalues
