@@ -57,9 +57,11 @@ fn view_pose(k: &Intrinsics, board: &[Vector2<f64>], pixels: &[Vector2<f64>]) ->
 
 /// RMS reprojection error of a view under `k` at `pose`.
 fn view_rms(k: &Intrinsics, pose: &Pose, board: &[Vector2<f64>], pixels: &[Vector2<f64>]) -> f64 {
+    // `pose.transform`, with the rotation built once per view, not per corner.
+    let (r, t) = (pose.rotation_matrix(), pose.translation_vector());
     let mut sum = 0.0;
     for (x, uv) in board.iter().zip(pixels) {
-        match k.project(&pose.transform(&Vector3::new(x.x, x.y, 0.0))) {
+        match k.project(&(r * Vector3::new(x.x, x.y, 0.0) + t)) {
             Some(p) => sum += (p - uv).norm_squared(),
             None => return f64::INFINITY,
         }
