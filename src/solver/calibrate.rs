@@ -740,7 +740,7 @@ fn solve_method(
 /// keeping whichever of the two ends at the lower cost; `first` when no camera
 /// has one, the second solve fails, or its loose solve comes close to where the
 /// converged first one ended (`ends_alike`: the work of converging it again is
-/// saved). Every solve's stage is recorded.
+/// saved). Every solve that returns a report is recorded as a stage.
 fn from_second_start(
     problem: &Problem,
     start: &State,
@@ -896,13 +896,17 @@ pub fn fit(dataset: &Dataset, request: &Request) -> Result<Calibration> {
     )?;
 
     let mut request = with_prior_noise(request, &dataset, &report.residuals);
+    // The stage whose result is kept: not always the last one recorded (a second
+    // start that was not kept comes after the first start's).
+    let mut kept = Stage::new(Method::Standard, &report);
     let (gauge, frozen, residuals) = if request.method == Method::Standard {
         let residuals = if lens_prior_reweighted(request_in, &dataset) {
             // The lens prior weighted by the estimated noise, not the provisional
             // one: a polish from the optimum, which may take no step at all.
             let report = standard.solve(&mut state, &request.settings)?;
             robust::check_stage(Method::Standard, &report, false)?;
-            stages.push(Stage::new(Method::Standard, &report));
+            kept = Stage::new(Method::Standard, &report);
+            stages.push(kept.clone());
             report.residuals
         } else {
             report.residuals
@@ -926,7 +930,13 @@ pub fn fit(dataset: &Dataset, request: &Request) -> Result<Calibration> {
             &mut warnings,
         )?
     };
+    if request.method != Method::Standard {
+        if let Some(last) = stages.last() {
+            kept = last.clone();
+        }
+    }
     let request = &request;
+    let before_rejection = stages.len();
     let (dataset, residuals, frozen, rejected) = finish_robustly(
         dataset,
         &mut state,
@@ -934,15 +944,21 @@ pub fn fit(dataset: &Dataset, request: &Request) -> Result<Calibration> {
         gauge.clone(),
         frozen,
         residuals,
+        kept.converged,
         &mut stages,
         &mut warnings,
     )?;
-    let converged = stages.last().map(|s| s.converged).unwrap_or(false);
+    // A rejection re-solve, where there was one, gives the result kept.
+    let last = if stages.len() > before_rejection {
+        stages.last().unwrap_or(&kept)
+    } else {
+        &kept
+    };
+    let converged = last.converged;
     if !converged {
         warnings.push(format!(
             "the {} solve did not converge: {}",
-            request.method,
-            stages.last().map(|s| s.message.as_str()).unwrap_or("")
+            request.method, last.message
         ));
     }
     Ok(Calibration {
@@ -998,6 +1014,8 @@ type Finished = (Dataset, Vec<f64>, Vec<usize>, Vec<Suspect>);
 
 /// After the method's solve: outlier rejection with re-solves (see
 /// [`robust::reject_outliers`]) and the warnings about what the data cannot show.
+/// `converged`: whether the solve whose result is kept converged (if not,
+/// nothing is rejected).
 #[allow(clippy::too_many_arguments)] // the pipeline's state, passed through once
 fn finish_robustly(
     dataset: Dataset,
@@ -1006,6 +1024,7 @@ fn finish_robustly(
     gauge: Vec<usize>,
     frozen: Vec<usize>,
     residuals: Vec<f64>,
+    converged: bool,
     stages: &mut Vec<Stage>,
     warnings: &mut Vec<String>,
 ) -> Result<Finished> {
@@ -1021,7 +1040,7 @@ fn finish_robustly(
     // stands out there is where the solve had yet to go, not a bad detection.
     // The result fails the guard rails as not converged, with its data whole.
     let mut settings = request.settings.clone();
-    if !stages.last().is_some_and(|s| s.converged) {
+    if !converged {
         settings.outlier_k = 0.0;
     }
     let r = robust::reject_outliers(problem, state, &settings, residuals)?;
@@ -1121,7 +1140,7 @@ mod tests {
                 stages.len()
             );
             assert!(e < 0.01, "seed {seed}: {e} px");
-            if stages.len() == 1 {
+            if stages.len() == 1 && stages[0].converged {
                 stopped_early += 1;
                 assert!(
                     apart < 0.01,
@@ -1130,9 +1149,8 @@ mod tests {
             }
             if seed == 23 {
                 assert!(apart > 0.3, "seed 23 no longer has two minima: {apart} px");
-                assert_eq!(
-                    stages.len(),
-                    2,
+                assert!(
+                    stages.len() >= 2,
                     "seed 23: the second start was not converged"
                 );
             }
