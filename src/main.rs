@@ -567,14 +567,11 @@ fn protocol_rows(
         "{}: reference calibration and subsets…",
         config.path.display()
     );
-    let setup =
-        protocol::prepare(config, &p).with_context(|| format!("{}", config.path.display()))?;
+    let setup = protocol::plan(config, &p).with_context(|| format!("{}", config.path.display()))?;
     for w in &setup.warnings {
         eprintln!("warning: {}: {w}", config.path.display());
     }
-    let tasks = (0..setup.header.tasks())
-        .filter(|&t| shard.is_none_or(|s| s.owns(t)))
-        .count();
+    let tasks = setup.tasks(shard).len();
     let bar = indicatif::ProgressBar::new(tasks as u64).with_style(
         indicatif::ProgressStyle::with_template(
             "{prefix} [{bar:40}] {pos}/{len} calibrations, {elapsed} elapsed, ETA {eta}",
@@ -586,8 +583,11 @@ fn protocol_rows(
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()?;
-    let rows = pool.install(|| setup.run(shard, &|| bar.inc(1)));
+    let run = pool
+        .install(|| setup.run_beside_reference(shard, &|| bar.inc(1)))
+        .with_context(|| format!("{}", config.path.display()));
     bar.finish_and_clear();
+    let (setup, rows) = run?;
     Ok((setup.header, rows))
 }
 

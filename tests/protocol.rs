@@ -2,7 +2,9 @@
 //! the synthetic presets (quick variants of configs/protocol_*.toml).
 mod common;
 use deformcal::app::config::{Config, ProtocolConfig};
-use deformcal::app::protocol::{draw_subsets, merge, prepare, test_rmse, Setup, Shard, ShardFile};
+use deformcal::app::protocol::{
+    draw_subsets, merge, plan, prepare, test_rmse, Setup, Shard, ShardFile,
+};
 use deformcal::app::protocol_report::{protocol_csv, summarise, Summary};
 use deformcal::model::synthetic::{Generator, Preset};
 use deformcal::solver::problem::{rmse, Hold, Loss, Problem, SolverSettings, State};
@@ -10,7 +12,12 @@ use deformcal::Method;
 use std::path::Path;
 use std::process::Command;
 
-fn setup(preset: &str, reference_images: usize, subsets: usize, methods: &[Method]) -> Setup {
+fn config_of(
+    preset: &str,
+    reference_images: usize,
+    subsets: usize,
+    methods: &[Method],
+) -> (Config, ProtocolConfig) {
     let text = format!(
         "[data]\nsynthetic = \"{preset}\"\n[reference]\nsynthetic = \"reference\"\nimages = {reference_images}\n"
     );
@@ -22,6 +29,11 @@ fn setup(preset: &str, reference_images: usize, subsets: usize, methods: &[Metho
         methods: methods.to_vec(),
         auto: false,
     };
+    (config, protocol)
+}
+
+fn setup(preset: &str, reference_images: usize, subsets: usize, methods: &[Method]) -> Setup {
+    let (config, protocol) = config_of(preset, reference_images, subsets, methods);
     prepare(&config, &protocol).unwrap()
 }
 
@@ -63,6 +75,22 @@ fn same_seed_same_results_across_threads_and_shards() {
     assert_eq!(
         protocol_csv(&s.header, &one).unwrap(),
         protocol_csv(&s.header, &two).unwrap()
+    );
+    // The CLI's path: the reference calibrated beside the subsets, not before them.
+    let (config, protocol) = config_of("t2", 80, 3, &[Method::Standard, Method::Full]);
+    let planned = plan(&config, &protocol).unwrap();
+    assert!(planned.reference.is_none() && planned.header.reference.is_none());
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .unwrap();
+    let (beside, rows) = pool
+        .install(|| planned.run_beside_reference(None, &|| {}))
+        .unwrap();
+    assert_eq!(beside.header, s.header);
+    assert_eq!(
+        protocol_csv(&s.header, &rows).unwrap(),
+        protocol_csv(&s.header, &one).unwrap()
     );
     let shards: Vec<ShardFile> = (0..2)
         .map(|i| {

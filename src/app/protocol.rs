@@ -367,6 +367,10 @@ pub struct Setup {
     /// Per camera, the mapping-error grid's rays under the reference and the
     /// truth: the same for every subset, so unprojected once.
     grids: Vec<[Option<Rays>; 2]>,
+    /// The reference set, until its calibration is installed.
+    reference_data: Option<Dataset>,
+    /// `[sfm]`, whose scene may need the reference calibration.
+    sfm_config: Option<SfmConfig>,
 }
 
 /// A mapping-error grid's pixels and rays ([`grid_rays`]).
@@ -374,6 +378,16 @@ type Rays = Vec<(nalgebra::Vector2<f64>, nalgebra::Vector3<f64>)>;
 
 /// Loads the data, runs the reference calibration and draws the subsets.
 pub fn prepare(config: &Config, protocol: &ProtocolConfig) -> Result<Setup> {
+    let mut setup = plan(config, protocol)?;
+    let reference = setup.reference_calibration()?;
+    setup.install_reference(reference)?;
+    Ok(setup)
+}
+
+/// [`prepare`] without the reference calibration, which is left to run beside
+/// the subsets' ([`Setup::run_beside_reference`]): it is one long single-threaded
+/// solve (650 images), and the other cores would wait for it.
+pub fn plan(config: &Config, protocol: &ProtocolConfig) -> Result<Setup> {
     let (dataset, truth) = crate::app::source::load_data(config)?;
     // One Ceres thread per solve: parallelism comes from running tasks side by side,
     // and single-threaded solves sum in a fixed order, so results are reproducible.
@@ -382,7 +396,7 @@ pub fn prepare(config: &Config, protocol: &ProtocolConfig) -> Result<Setup> {
         ..SolverSettings::from(&config.calibration)
     };
     let mut warnings = Vec::new();
-    let reference = match &config.reference {
+    let reference_data = match &config.reference {
         None => None,
         Some(r) => {
             let (ref_data, _) =
@@ -395,18 +409,7 @@ pub fn prepare(config: &Config, protocol: &ProtocolConfig) -> Result<Setup> {
                     dataset.cameras.len()
                 )));
             }
-            let request = Request {
-                method: Method::Static,
-                settings: settings.clone(),
-                gauge: None,
-            };
-            let c = calibrate(&ref_data, &request).map_err(|e| match e {
-                Error::Degenerate(m) | Error::Init(m) | Error::Solver(m) => {
-                    Error::Degenerate(format!("the reference calibration failed: {m}"))
-                }
-                other => other,
-            })?;
-            Some(c)
+            Some(ref_data)
         }
     };
     let subsets = draw_subsets(
@@ -424,14 +427,7 @@ pub fn prepare(config: &Config, protocol: &ProtocolConfig) -> Result<Setup> {
         target: dataset.target,
         cameras: dataset.cameras.clone(),
         dataset_images: dataset.num_frames(),
-        reference: reference.as_ref().map(|c| ReferenceInfo {
-            intrinsics: c.state.intrinsics.clone(),
-            rmse_px: c.rmse_px,
-            images: c.dataset.num_frames(),
-            observations: c.dataset.observations.len(),
-            converged: c.converged,
-            board: crate::app::board_json::of(c),
-        }),
+        reference: None,
         truth: truth.as_ref().map(|t| t.intrinsics.clone()),
         auto: protocol.auto.then(|| {
             let a = AutoSettings::from(&config.calibration);
@@ -442,38 +438,19 @@ pub fn prepare(config: &Config, protocol: &ProtocolConfig) -> Result<Setup> {
             }
         }),
     };
-    let sfm = match &config.sfm {
-        None => None,
-        Some(s) => Some(sfm_experiment(
-            s,
-            &header,
-            truth.as_ref(),
-            reference.as_ref(),
-        )?),
-    };
-    let grids = header
-        .cameras
-        .iter()
-        .enumerate()
-        .map(|(k, cam)| {
-            let rays = |i: &Intrinsics| grid_rays(i, cam.width, cam.height);
-            [
-                reference.as_ref().map(|r| rays(&r.state.intrinsics[k])),
-                truth.as_ref().map(|t| rays(&t.intrinsics[k])),
-            ]
-        })
-        .collect();
     Ok(Setup {
-        grids,
+        grids: Vec::new(),
         header,
         dataset,
         truth,
-        reference,
+        reference: None,
         subsets,
         settings,
         warnings,
         detector_noise_px: config.calibration.detector_noise_px,
-        sfm,
+        sfm: None,
+        reference_data,
+        sfm_config: config.sfm.clone(),
     })
 }
 
@@ -611,6 +588,65 @@ pub fn test_rmse(
 }
 
 impl Setup {
+    /// The reference set's `static` calibration (none without a reference set),
+    /// with the settings of every task.
+    pub fn reference_calibration(&self) -> Result<Option<Calibration>> {
+        let Some(ref_data) = &self.reference_data else {
+            return Ok(None);
+        };
+        let request = Request {
+            method: Method::Static,
+            settings: self.settings.clone(),
+            gauge: None,
+        };
+        calibrate(ref_data, &request)
+            .map(Some)
+            .map_err(|e| match e {
+                Error::Degenerate(m) | Error::Init(m) | Error::Solver(m) => {
+                    Error::Degenerate(format!("the reference calibration failed: {m}"))
+                }
+                other => other,
+            })
+    }
+
+    /// Takes the reference calibration into the header, the `[sfm]` scene and the
+    /// mapping-error grids, which the rows are measured against.
+    pub fn install_reference(&mut self, reference: Option<Calibration>) -> Result<()> {
+        self.header.reference = reference.as_ref().map(|c| ReferenceInfo {
+            intrinsics: c.state.intrinsics.clone(),
+            rmse_px: c.rmse_px,
+            images: c.dataset.num_frames(),
+            observations: c.dataset.observations.len(),
+            converged: c.converged,
+            board: crate::app::board_json::of(c),
+        });
+        self.sfm = match &self.sfm_config {
+            None => None,
+            Some(s) => Some(sfm_experiment(
+                s,
+                &self.header,
+                self.truth.as_ref(),
+                reference.as_ref(),
+            )?),
+        };
+        self.grids = self
+            .header
+            .cameras
+            .iter()
+            .enumerate()
+            .map(|(k, cam)| {
+                let rays = |i: &Intrinsics| grid_rays(i, cam.width, cam.height);
+                [
+                    reference.as_ref().map(|r| rays(&r.state.intrinsics[k])),
+                    self.truth.as_ref().map(|t| rays(&t.intrinsics[k])),
+                ]
+            })
+            .collect();
+        self.reference = reference;
+        self.reference_data = None;
+        Ok(())
+    }
+
     /// Camera `k`'s results in `c`; a failed test error is recorded in the row's `error`.
     fn camera_row(
         &self,
@@ -658,7 +694,14 @@ impl Setup {
     }
 
     /// Runs one subset × method task; failures become a row with the reason.
+    /// Needs the reference calibration installed.
     pub fn task(&self, t: usize) -> Row {
+        self.row(self.calibrate_task(t))
+    }
+
+    /// The calibration of task `t`, and the part of its row that does not need
+    /// the reference calibration.
+    fn calibrate_task(&self, t: usize) -> Calibrated {
         let (subset, method, auto) = match self.header.task(t) {
             Task::Fixed(s, m) => (s, m, false),
             Task::Auto(s) => (s, Method::Standard, true),
@@ -705,7 +748,7 @@ impl Setup {
             Ok(c) => c,
             Err(e) => {
                 row.error = Some(e.to_string());
-                return row;
+                return Calibrated { row, solved: None };
             }
         };
         if let Some(s) = c.selection.take() {
@@ -721,6 +764,20 @@ impl Setup {
         c.detector_noise_px = self.detector_noise_px;
         row.bias_ratio = c.trust(c.detector_noise_px).map(|t| t.bias_ratio);
         let uncertainty = c.uncertainty().ok();
+        record_bends(&mut row, &c);
+        Calibrated {
+            row,
+            solved: Some((c, uncertainty)),
+        }
+    }
+
+    /// The row of a calibrated task: its results against the reference, the
+    /// truth and the `[sfm]` scene.
+    fn row(&self, calibrated: Calibrated) -> Row {
+        let Calibrated { mut row, solved } = calibrated;
+        let Some((c, uncertainty)) = solved else {
+            return row;
+        };
         for k in 0..self.header.cameras.len() {
             let u = uncertainty.as_ref().and_then(|u| u.get(k));
             let camera = self.camera_row(&c, k, u, &mut row.error);
@@ -732,17 +789,14 @@ impl Setup {
                 Err(err) => row.sfm_error = Some(err.to_string()),
             }
         }
-        record_bends(&mut row, &c);
         row
     }
 
     /// Runs the tasks of `shard` (all without one) on the current rayon pool,
-    /// calling `tick` after each; rows come back in task order.
+    /// calling `tick` after each; rows come back in task order. Needs the
+    /// reference calibration installed.
     pub fn run(&self, shard: Option<Shard>, tick: &(dyn Fn() + Sync)) -> Vec<Row> {
-        let tasks: Vec<usize> = (0..self.header.tasks())
-            .filter(|&t| shard.is_none_or(|s| s.owns(t)))
-            .collect();
-        tasks
+        self.tasks(shard)
             .par_iter()
             .map(|&t| {
                 let row = self.task(t);
@@ -751,6 +805,47 @@ impl Setup {
             })
             .collect()
     }
+
+    /// [`Setup::run`] on a [`plan`]: the reference calibration runs on one thread
+    /// of the pool while the others calibrate the subsets, and each row is
+    /// measured against the reference once both are done. The rows are the same
+    /// as [`prepare`] and [`Setup::run`] give (every solve is single-threaded).
+    pub fn run_beside_reference(
+        mut self,
+        shard: Option<Shard>,
+        tick: &(dyn Fn() + Sync),
+    ) -> Result<(Setup, Vec<Row>)> {
+        let tasks = self.tasks(shard);
+        let (reference, calibrated) = rayon::join(
+            || self.reference_calibration(),
+            || {
+                tasks
+                    .par_iter()
+                    .map(|&t| {
+                        let c = self.calibrate_task(t);
+                        tick();
+                        c
+                    })
+                    .collect::<Vec<_>>()
+            },
+        );
+        self.install_reference(reference?)?;
+        let rows = calibrated.into_par_iter().map(|c| self.row(c)).collect();
+        Ok((self, rows))
+    }
+
+    /// The tasks of `shard`, all without one.
+    pub fn tasks(&self, shard: Option<Shard>) -> Vec<usize> {
+        (0..self.header.tasks())
+            .filter(|&t| shard.is_none_or(|s| s.owns(t)))
+            .collect()
+    }
+}
+
+/// A task's calibration and the part of its row that needs no reference.
+struct Calibrated {
+    row: Row,
+    solved: Option<(Calibration, Option<Vec<CameraUncertainty>>)>,
 }
 
 fn finite(v: f64) -> Option<f64> {
