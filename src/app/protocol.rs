@@ -22,6 +22,7 @@ use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::sync::OnceLock;
 
 pub use crate::app::config::MAX_SUBSETS;
 
@@ -379,8 +380,8 @@ type Rays = Vec<(nalgebra::Vector2<f64>, nalgebra::Vector3<f64>)>;
 /// Loads the data, runs the reference calibration and draws the subsets.
 pub fn prepare(config: &Config, protocol: &ProtocolConfig) -> Result<Setup> {
     let mut setup = plan(config, protocol)?;
-    let reference = setup.reference_calibration()?;
-    setup.install_reference(reference)?;
+    let measures = setup.measures()?;
+    setup.install(measures);
     Ok(setup)
 }
 
@@ -590,7 +591,7 @@ pub fn test_rmse(
 impl Setup {
     /// The reference set's `static` calibration (none without a reference set),
     /// with the settings of every task.
-    pub fn reference_calibration(&self) -> Result<Option<Calibration>> {
+    fn reference_calibration(&self) -> Result<Option<Calibration>> {
         let Some(ref_data) = &self.reference_data else {
             return Ok(None);
         };
@@ -609,10 +610,10 @@ impl Setup {
             })
     }
 
-    /// Takes the reference calibration into the header, the `[sfm]` scene and the
-    /// mapping-error grids, which the rows are measured against.
-    pub fn install_reference(&mut self, reference: Option<Calibration>) -> Result<()> {
-        self.header.reference = reference.as_ref().map(|c| ReferenceInfo {
+    /// The reference calibration and what the rows are measured against with it.
+    fn measures(&self) -> Result<Measures> {
+        let reference = self.reference_calibration()?;
+        let reference_info = reference.as_ref().map(|c| ReferenceInfo {
             intrinsics: c.state.intrinsics.clone(),
             rmse_px: c.rmse_px,
             images: c.dataset.num_frames(),
@@ -620,7 +621,7 @@ impl Setup {
             converged: c.converged,
             board: crate::app::board_json::of(c),
         });
-        self.sfm = match &self.sfm_config {
+        let sfm = match &self.sfm_config {
             None => None,
             Some(s) => Some(sfm_experiment(
                 s,
@@ -629,7 +630,7 @@ impl Setup {
                 reference.as_ref(),
             )?),
         };
-        self.grids = self
+        let grids = self
             .header
             .cameras
             .iter()
@@ -642,14 +643,36 @@ impl Setup {
                 ]
             })
             .collect();
-        self.reference = reference;
+        Ok(Measures {
+            reference,
+            reference_info,
+            sfm,
+            grids,
+        })
+    }
+
+    /// Takes the reference calibration into the header and the setup.
+    fn install(&mut self, m: Measures) {
+        self.header.reference = m.reference_info;
+        self.reference = m.reference;
+        self.sfm = m.sfm;
+        self.grids = m.grids;
         self.reference_data = None;
-        Ok(())
+    }
+
+    /// What the rows are measured against, once installed.
+    fn against(&self) -> Against<'_> {
+        Against {
+            reference: self.reference.as_ref(),
+            sfm: self.sfm.as_ref(),
+            grids: &self.grids,
+        }
     }
 
     /// Camera `k`'s results in `c`; a failed test error is recorded in the row's `error`.
     fn camera_row(
         &self,
+        against: &Against,
         c: &Calibration,
         k: usize,
         uncertainty: Option<&CameraUncertainty>,
@@ -657,7 +680,7 @@ impl Setup {
     ) -> CameraRow {
         let cam = &self.header.cameras[k];
         let theta = c.state.intrinsics[k];
-        let against = |rays: &Option<Rays>| {
+        let errors = |rays: &Option<Rays>| {
             rays.as_ref().map_or((None, None), |r| {
                 (
                     finite(mapping_error_of(r, &theta)),
@@ -665,10 +688,10 @@ impl Setup {
                 )
             })
         };
-        let [reference, truth] = &self.grids[k];
-        let (mapping, mapping_rot) = against(reference);
-        let (truth, truth_rot) = against(truth);
-        let test = match &self.reference {
+        let [reference, truth] = &against.grids[k];
+        let (mapping, mapping_rot) = errors(reference);
+        let (truth, truth_rot) = errors(truth);
+        let test = match against.reference {
             None => None,
             Some(r) => match test_rmse(r, k, &theta, &self.settings) {
                 Ok(e) => finite(e),
@@ -696,7 +719,7 @@ impl Setup {
     /// Runs one subset × method task; failures become a row with the reason.
     /// Needs the reference calibration installed.
     pub fn task(&self, t: usize) -> Row {
-        self.row(self.calibrate_task(t))
+        self.row(&self.against(), self.calibrate_task(t))
     }
 
     /// The calibration of task `t`, and the part of its row that does not need
@@ -773,17 +796,17 @@ impl Setup {
 
     /// The row of a calibrated task: its results against the reference, the
     /// truth and the `[sfm]` scene.
-    fn row(&self, calibrated: Calibrated) -> Row {
+    fn row(&self, against: &Against, calibrated: Calibrated) -> Row {
         let Calibrated { mut row, solved } = calibrated;
         let Some((c, uncertainty)) = solved else {
             return row;
         };
         for k in 0..self.header.cameras.len() {
             let u = uncertainty.as_ref().and_then(|u| u.get(k));
-            let camera = self.camera_row(&c, k, u, &mut row.error);
+            let camera = self.camera_row(against, &c, k, u, &mut row.error);
             row.cameras.push(camera);
         }
-        if let Some(e) = &self.sfm {
+        if let Some(e) = against.sfm {
             match e.run(&c.state.intrinsics[0]) {
                 Ok(r) => row.loop_closure_px = finite(r.loop_closure_px),
                 Err(err) => row.sfm_error = Some(err.to_string()),
@@ -807,30 +830,46 @@ impl Setup {
     }
 
     /// [`Setup::run`] on a [`plan`]: the reference calibration runs on one thread
-    /// of the pool while the others calibrate the subsets, and each row is
-    /// measured against the reference once both are done. The rows are the same
-    /// as [`prepare`] and [`Setup::run`] give (every solve is single-threaded).
+    /// of the pool while the others calibrate the subsets. A subset calibrated
+    /// after it is measured against it at once, one calibrated before once both
+    /// are done. The rows are those [`prepare`] and [`Setup::run`] give (each row
+    /// is the same function of its calibration and the reference's, and every
+    /// solve is single-threaded).
     pub fn run_beside_reference(
         mut self,
         shard: Option<Shard>,
         tick: &(dyn Fn() + Sync),
     ) -> Result<(Setup, Vec<Row>)> {
         let tasks = self.tasks(shard);
-        let (reference, calibrated) = rayon::join(
-            || self.reference_calibration(),
+        let measures = OnceLock::new();
+        let (measured, parts) = rayon::join(
+            || self.measures().map(|m| measures.set(m).ok()),
             || {
                 tasks
                     .par_iter()
                     .map(|&t| {
                         let c = self.calibrate_task(t);
                         tick();
-                        c
+                        match measures.get() {
+                            Some(m) => Part::Row(self.row(&m.against(), c)),
+                            None => Part::Pending(c),
+                        }
                     })
                     .collect::<Vec<_>>()
             },
         );
-        self.install_reference(reference?)?;
-        let rows = calibrated.into_par_iter().map(|c| self.row(c)).collect();
+        measured?;
+        let measures = measures
+            .into_inner()
+            .ok_or_else(|| Error::Invalid("the reference calibration was not kept".into()))?;
+        let rows = parts
+            .into_par_iter()
+            .map(|p| match p {
+                Part::Row(row) => row,
+                Part::Pending(c) => self.row(&measures.against(), c),
+            })
+            .collect();
+        self.install(measures);
         Ok((self, rows))
     }
 
@@ -840,6 +879,40 @@ impl Setup {
             .filter(|&t| shard.is_none_or(|s| s.owns(t)))
             .collect()
     }
+}
+
+/// The reference calibration and what the rows are measured against with it.
+struct Measures {
+    reference: Option<Calibration>,
+    reference_info: Option<ReferenceInfo>,
+    sfm: Option<Experiment>,
+    grids: Vec<[Option<Rays>; 2]>,
+}
+
+impl Measures {
+    fn against(&self) -> Against<'_> {
+        Against {
+            reference: self.reference.as_ref(),
+            sfm: self.sfm.as_ref(),
+            grids: &self.grids,
+        }
+    }
+}
+
+/// What a row is measured against: the reference calibration, the `[sfm]`
+/// scene, and per camera the mapping-error grids under the reference and the truth.
+struct Against<'a> {
+    reference: Option<&'a Calibration>,
+    sfm: Option<&'a Experiment>,
+    grids: &'a [[Option<Rays>; 2]],
+}
+
+/// A task in [`Setup::run_beside_reference`]: its row, or its calibration
+/// waiting for the reference's.
+#[allow(clippy::large_enum_variant)] // one per task, moved once
+enum Part {
+    Row(Row),
+    Pending(Calibrated),
 }
 
 /// A task's calibration and the part of its row that needs no reference.
