@@ -873,13 +873,7 @@ pub fn fit(dataset: &Dataset, request: &Request) -> Result<Calibration> {
     let initial_intrinsics = state.intrinsics.clone();
 
     let mut stages = Vec::new();
-    let standard = Problem {
-        dataset: &dataset,
-        method: Method::Standard,
-        gauge: Vec::new(),
-        frozen: Vec::new(),
-        hold: Hold::default(),
-    };
+    let standard = Problem::standard(&dataset);
     let initial = state.clone();
     let warm = warm_start_settings(request, &dataset);
     let report = standard.solve(&mut state, &warm)?;
@@ -1097,13 +1091,7 @@ mod tests {
             g.print_scale = print;
             let (dataset, _) = g.generate();
             let (dataset, start, _) = initialise(&dataset, &mut Vec::new()).unwrap();
-            let problem = Problem {
-                dataset: &dataset,
-                method: Method::Standard,
-                gauge: Vec::new(),
-                frozen: Vec::new(),
-                hold: Hold::default(),
-            };
+            let problem = Problem::standard(&dataset);
             let settings = SolverSettings::default();
             let request = Request {
                 method: Method::Standard,

@@ -176,6 +176,20 @@ pub struct Problem<'a> {
     pub hold: Hold,
 }
 
+impl<'a> Problem<'a> {
+    /// The rigid-board problem over `dataset`, nothing held: the first solve of
+    /// every method.
+    pub fn standard(dataset: &'a Dataset) -> Self {
+        Problem {
+            dataset,
+            method: Method::Standard,
+            gauge: Vec::new(),
+            frozen: Vec::new(),
+            hold: Hold::default(),
+        }
+    }
+}
+
 /// Images observing each corner (any camera counted once per frame).
 pub fn frames_per_corner(dataset: &Dataset) -> Vec<usize> {
     let mut seen = std::collections::HashSet::new();

@@ -122,10 +122,8 @@ pub fn repose_stray_frames(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::board::Method;
     use crate::model::lens::LensModel;
     use crate::model::synthetic::{Generator, Preset};
-    use crate::solver::problem::Hold;
     use nalgebra::{Rotation3, Vector3};
 
     /// A `ds` view beside the camera and a central one, their poses turned into
@@ -137,13 +135,7 @@ mod tests {
         g.bend_scale = 0.0;
         g.print_scale = 0.0;
         let (dataset, truth) = g.generate();
-        let problem = Problem {
-            dataset: &dataset,
-            method: Method::Standard,
-            gauge: Vec::new(),
-            frozen: Vec::new(),
-            hold: Hold::default(),
-        };
+        let problem = Problem::standard(&dataset);
         let settings = SolverSettings::default();
         let exact = State::rigid(
             truth.intrinsics.clone(),
