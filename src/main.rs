@@ -567,24 +567,25 @@ fn protocol_rows(
         "{}: reference calibration and subsets…",
         config.path.display()
     );
-    let setup = protocol::plan(config, &p).with_context(|| format!("{}", config.path.display()))?;
-    for w in &setup.warnings {
+    let planned =
+        protocol::plan(config, &p).with_context(|| format!("{}", config.path.display()))?;
+    for w in planned.warnings() {
         eprintln!("warning: {}: {w}", config.path.display());
     }
-    let tasks = setup.tasks(shard).len();
-    let bar = indicatif::ProgressBar::new(tasks as u64).with_style(
+    let calibrations = planned.calibrations(shard);
+    let bar = indicatif::ProgressBar::new(calibrations as u64).with_style(
         indicatif::ProgressStyle::with_template(
             "{prefix} [{bar:40}] {pos}/{len} calibrations, {elapsed} elapsed, ETA {eta}",
         )
         .expect("valid template")
         .progress_chars("=> "),
     );
-    bar.set_prefix(setup.header.dataset.clone());
+    bar.set_prefix(planned.header().dataset.clone());
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()?;
     let run = pool
-        .install(|| setup.run_beside_reference(shard, &|| bar.inc(1)))
+        .install(|| planned.run_beside_reference(shard, &|| bar.inc(1)))
         .with_context(|| format!("{}", config.path.display()));
     bar.finish_and_clear();
     let (setup, rows) = run?;

@@ -79,7 +79,8 @@ fn same_seed_same_results_across_threads_and_shards() {
     // The CLI's path: the reference calibrated beside the subsets, not before them.
     let (config, protocol) = config_of("t2", 80, 3, &[Method::Standard, Method::Full]);
     let planned = plan(&config, &protocol).unwrap();
-    assert!(planned.reference.is_none() && planned.header.reference.is_none());
+    assert!(planned.header().reference.is_none());
+    assert_eq!(planned.calibrations(None), one.len() + 1);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(2)
         .build()
@@ -117,6 +118,47 @@ fn same_seed_same_results_across_threads_and_shards() {
         shards[1].clone()
     ])
     .is_err());
+}
+
+/// A reference that cannot be calibrated (2 images) fails the run beside the
+/// subsets with its reason and no rows, as it fails `prepare`, and stops the
+/// subsets not yet started.
+#[test]
+fn a_failing_reference_fails_the_run_beside_the_subsets() {
+    let text = "[data]\nsynthetic = \"t2\"\nimages = 60\n[reference]\nsynthetic = \"reference\"\nimages = 2\n";
+    let config = Config::parse(text, Path::new("test.toml")).unwrap();
+    let protocol = ProtocolConfig {
+        subsets: 4,
+        images_per_subset: 25,
+        seed: 7,
+        methods: vec![Method::Standard],
+        auto: false,
+    };
+    // On one thread the reference runs first, so no subset is calibrated after
+    // it failed: one tick, the reference's.
+    let ticks = std::sync::atomic::AtomicUsize::new(0);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let planned = plan(&config, &protocol).unwrap();
+    let err = pool
+        .install(|| {
+            planned.run_beside_reference(None, &|| {
+                ticks.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            })
+        })
+        .err()
+        .expect("a failed reference is an error")
+        .to_string();
+    assert!(err.contains("the reference calibration failed"), "{err}");
+    assert_eq!(
+        ticks.into_inner(),
+        1,
+        "subsets were calibrated after the reference failed"
+    );
+    let before = prepare(&config, &protocol).err().unwrap().to_string();
+    assert_eq!(err, before);
 }
 
 /// `"auto"` among the protocol's methods: one more row per subset, with the method

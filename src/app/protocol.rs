@@ -22,6 +22,7 @@ use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::OnceLock;
 
 pub use crate::app::config::MAX_SUBSETS;
@@ -350,7 +351,8 @@ pub struct ShardFile {
     pub rows: Vec<Row>,
 }
 
-/// Everything prepared before the tasks run.
+/// Everything prepared before the tasks run, the reference calibration included
+/// ([`prepare`]; [`plan`] leaves it to [`Plan::run_beside_reference`]).
 pub struct Setup {
     pub header: Header,
     pub dataset: Dataset,
@@ -379,16 +381,18 @@ type Rays = Vec<(nalgebra::Vector2<f64>, nalgebra::Vector3<f64>)>;
 
 /// Loads the data, runs the reference calibration and draws the subsets.
 pub fn prepare(config: &Config, protocol: &ProtocolConfig) -> Result<Setup> {
-    let mut setup = plan(config, protocol)?;
+    let Plan(mut setup) = plan(config, protocol)?;
     let measures = setup.measures()?;
     setup.install(measures);
     Ok(setup)
 }
 
 /// [`prepare`] without the reference calibration, which is left to run beside
-/// the subsets' ([`Setup::run_beside_reference`]): it is one long single-threaded
-/// solve (650 images), and the other cores would wait for it.
-pub fn plan(config: &Config, protocol: &ProtocolConfig) -> Result<Setup> {
+/// the subsets' ([`Plan::run_beside_reference`]): it is one long single-threaded
+/// solve (650 images), and the other cores would wait for it. What needs the
+/// reference (its board σ, the `[sfm]` scene, the mapping-error grids) waits
+/// with it; the `[sfm]` values are checked here.
+pub fn plan(config: &Config, protocol: &ProtocolConfig) -> Result<Plan> {
     let (dataset, truth) = crate::app::source::load_data(config)?;
     // One Ceres thread per solve: parallelism comes from running tasks side by side,
     // and single-threaded solves sum in a fixed order, so results are reproducible.
@@ -439,7 +443,13 @@ pub fn plan(config: &Config, protocol: &ProtocolConfig) -> Result<Setup> {
             }
         }),
     };
-    Ok(Setup {
+    if let Some(s) = &config.sfm {
+        s.check().map_err(Error::Invalid)?;
+        if truth.is_none() && reference_data.is_none() {
+            return Err(no_sfm_camera());
+        }
+    }
+    Ok(Plan(Setup {
         grids: Vec::new(),
         header,
         dataset,
@@ -452,7 +462,16 @@ pub fn plan(config: &Config, protocol: &ProtocolConfig) -> Result<Setup> {
         sfm: None,
         reference_data,
         sfm_config: config.sfm.clone(),
-    })
+    }))
+}
+
+/// `[sfm]` without synthetic data's truth or a reference set.
+fn no_sfm_camera() -> Error {
+    Error::Invalid(
+        "[sfm] needs a camera to see the scene with: synthetic data (its true camera) or a \
+         [reference] set (its calibration)"
+            .into(),
+    )
 }
 
 /// The scene of `[sfm]`, seen by camera 0's true intrinsics: the truth of
@@ -467,12 +486,7 @@ pub fn sfm_experiment(
     let camera = truth
         .map(|t| t.intrinsics[0])
         .or_else(|| reference.map(|r| r.state.intrinsics[0]))
-        .ok_or_else(|| {
-            Error::Invalid(
-                "[sfm] needs a camera to see the scene with: synthetic data (its true camera) or a                  [reference] set (its calibration)"
-                    .into(),
-            )
-        })?;
+        .ok_or_else(no_sfm_camera)?;
     let cam = &header.cameras[0];
     Experiment::new(s, &camera, cam.width, cam.height)
 }
@@ -717,7 +731,6 @@ impl Setup {
     }
 
     /// Runs one subset × method task; failures become a row with the reason.
-    /// Needs the reference calibration installed.
     pub fn task(&self, t: usize) -> Row {
         self.row(&self.against(), self.calibrate_task(t))
     }
@@ -816,8 +829,7 @@ impl Setup {
     }
 
     /// Runs the tasks of `shard` (all without one) on the current rayon pool,
-    /// calling `tick` after each; rows come back in task order. Needs the
-    /// reference calibration installed.
+    /// calling `tick` after each; rows come back in task order.
     pub fn run(&self, shard: Option<Shard>, tick: &(dyn Fn() + Sync)) -> Vec<Row> {
         self.tasks(shard)
             .par_iter()
@@ -829,29 +841,70 @@ impl Setup {
             .collect()
     }
 
-    /// [`Setup::run`] on a [`plan`]: the reference calibration runs on one thread
-    /// of the pool while the others calibrate the subsets. A subset calibrated
-    /// after it is measured against it at once, one calibrated before once both
-    /// are done. The rows are those [`prepare`] and [`Setup::run`] give (each row
-    /// is the same function of its calibration and the reference's, and every
-    /// solve is single-threaded).
+    /// The tasks of `shard`, all without one.
+    fn tasks(&self, shard: Option<Shard>) -> Vec<usize> {
+        (0..self.header.tasks())
+            .filter(|&t| shard.is_none_or(|s| s.owns(t)))
+            .collect()
+    }
+}
+
+/// A [`Setup`] whose reference calibration is still to run ([`plan`]).
+pub struct Plan(Setup);
+
+impl Plan {
+    /// The header, without the reference calibration's part.
+    pub fn header(&self) -> &Header {
+        &self.0.header
+    }
+
+    /// Warnings about the configuration.
+    pub fn warnings(&self) -> &[String] {
+        &self.0.warnings
+    }
+
+    /// The calibrations [`Plan::run_beside_reference`] runs for `shard`: its
+    /// tasks, and the reference's where there is one.
+    pub fn calibrations(&self, shard: Option<Shard>) -> usize {
+        self.0.tasks(shard).len() + usize::from(self.0.reference_data.is_some())
+    }
+
+    /// [`Setup::run`], with the reference calibrated on one thread of the pool
+    /// while the others calibrate the subsets; `tick` after each calibration. A
+    /// subset calibrated after the reference is measured against it at once, one
+    /// calibrated before once both are done. The rows are those [`prepare`] and
+    /// [`Setup::run`] give: each row is the same function of its calibration and
+    /// the reference's, and every solve is single-threaded. A reference that
+    /// fails stops the subsets not yet started.
     pub fn run_beside_reference(
-        mut self,
+        self,
         shard: Option<Shard>,
         tick: &(dyn Fn() + Sync),
     ) -> Result<(Setup, Vec<Row>)> {
-        let tasks = self.tasks(shard);
+        let Plan(mut setup) = self;
+        let tasks = setup.tasks(shard);
         let measures = OnceLock::new();
+        let failed = AtomicBool::new(false);
         let (measured, parts) = rayon::join(
-            || self.measures().map(|m| measures.set(m).ok()),
+            || {
+                let m = setup.measures();
+                failed.store(m.is_err(), Ordering::Relaxed);
+                if setup.reference_data.is_some() {
+                    tick();
+                }
+                m.map(|m| measures.set(m).ok())
+            },
             || {
                 tasks
                     .par_iter()
                     .map(|&t| {
-                        let c = self.calibrate_task(t);
+                        if failed.load(Ordering::Relaxed) {
+                            return Part::Skipped;
+                        }
+                        let c = setup.calibrate_task(t);
                         tick();
                         match measures.get() {
-                            Some(m) => Part::Row(self.row(&m.against(), c)),
+                            Some(m) => Part::Row(setup.row(&m.against(), c)),
                             None => Part::Pending(c),
                         }
                     })
@@ -864,20 +917,14 @@ impl Setup {
             .ok_or_else(|| Error::Invalid("the reference calibration was not kept".into()))?;
         let rows = parts
             .into_par_iter()
-            .map(|p| match p {
-                Part::Row(row) => row,
-                Part::Pending(c) => self.row(&measures.against(), c),
+            .filter_map(|p| match p {
+                Part::Row(row) => Some(row),
+                Part::Pending(c) => Some(setup.row(&measures.against(), c)),
+                Part::Skipped => None,
             })
             .collect();
-        self.install(measures);
-        Ok((self, rows))
-    }
-
-    /// The tasks of `shard`, all without one.
-    pub fn tasks(&self, shard: Option<Shard>) -> Vec<usize> {
-        (0..self.header.tasks())
-            .filter(|&t| shard.is_none_or(|s| s.owns(t)))
-            .collect()
+        setup.install(measures);
+        Ok((setup, rows))
     }
 }
 
@@ -907,12 +954,14 @@ struct Against<'a> {
     grids: &'a [[Option<Rays>; 2]],
 }
 
-/// A task in [`Setup::run_beside_reference`]: its row, or its calibration
+/// A task in [`Plan::run_beside_reference`]: its row, or its calibration
 /// waiting for the reference's.
 #[allow(clippy::large_enum_variant)] // one per task, moved once
 enum Part {
     Row(Row),
     Pending(Calibrated),
+    /// Not run: the reference calibration failed.
+    Skipped,
 }
 
 /// A task's calibration and the part of its row that needs no reference.
