@@ -125,15 +125,7 @@ fn same_seed_same_results_across_threads_and_shards() {
 /// subsets not yet started.
 #[test]
 fn a_failing_reference_fails_the_run_beside_the_subsets() {
-    let text = "[data]\nsynthetic = \"t2\"\nimages = 60\n[reference]\nsynthetic = \"reference\"\nimages = 2\n";
-    let config = Config::parse(text, Path::new("test.toml")).unwrap();
-    let protocol = ProtocolConfig {
-        subsets: 4,
-        images_per_subset: 25,
-        seed: 7,
-        methods: vec![Method::Standard],
-        auto: false,
-    };
+    let (config, protocol) = config_of("t2", 2, 4, &[Method::Standard]);
     // On one thread the reference runs first, so no subset is calibrated after
     // it failed: one tick, the reference's.
     let ticks = std::sync::atomic::AtomicUsize::new(0);

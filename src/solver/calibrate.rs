@@ -915,20 +915,20 @@ pub fn fit(dataset: &Dataset, request: &Request) -> Result<Calibration> {
             &mut stages,
             &mut warnings,
         )?;
-        with_auto_priors(
+        let solved = with_auto_priors(
             &dataset,
             &mut state,
             &mut request,
             solved,
             &mut stages,
             &mut warnings,
-        )?
-    };
-    if request.method != Method::Standard {
+        )?;
+        // The method's last solve is the one kept.
         if let Some(last) = stages.last() {
             kept = last.clone();
         }
-    }
+        solved
+    };
     let request = &request;
     let before_rejection = stages.len();
     let (dataset, residuals, frozen, rejected) = finish_robustly(
