@@ -31,6 +31,27 @@ SolveReport refit_poses(ProblemData& data, const SolveOptions& options);
 // parameters, and optionally the Jacobian over the free parameters.
 Evaluation evaluate(const ProblemData& data, const SolveOptions& options, bool with_jacobian);
 
+// A pose-only refit prepared once, for refits under many intrinsics (the
+// protocol's test error: every calibration against the same reference).  The
+// frames' corners and held board points are kept; each refit starts from the
+// prepared poses and keeps no state, so one PoseRefit may serve many threads.
+struct PoseRefitState;
+class PoseRefit {
+ public:
+  explicit PoseRefit(std::unique_ptr<const PoseRefitState> state);
+  ~PoseRefit();
+  // The RMSE of the unweighted residuals after every frame's pose is refitted
+  // under `intrinsics` (every camera's lens parameters, in camera order).
+  // Throws where a board point has no image.
+  double rmse_px(rust::Slice<const double> intrinsics) const;
+
+ private:
+  std::unique_ptr<const PoseRefitState> state_;
+};
+
+// Prepares the pose-only refit of `data` (the same checks as refit_poses).
+std::unique_ptr<PoseRefit> prepare_pose_refit(const ProblemData& data, const SolveOptions& options);
+
 // The Jacobian of the weighted residuals (loss not applied) over the free
 // parameters in CRS, rows in observation order, and the residuals; held in C++
 // and read from Rust as slices, since copying element by element into a

@@ -6,8 +6,6 @@
 // block-diagonal system.  Knows nothing of how the problem data are laid out.
 #pragma once
 
-#include <ceres/jet.h>
-
 #include <Eigen/Dense>
 #include <cmath>
 #include <memory>
@@ -20,32 +18,41 @@ namespace deformcal {
 using Matrix6 = Eigen::Matrix<double, 6, 6>;
 using Vector6 = Eigen::Matrix<double, 6, 1>;
 
+// One corner of a view: its observed pixel, weight and held board point.
+struct PoseCorner {
+  double u, v, w;
+  double x[3];
+};
+
 // One camera's corners in one frame, their board points held; PoseView hides
 // the lens so that the views of one frame may mix lens models.
 class PoseView {
  public:
   virtual ~PoseView() = default;
-  virtual void Add(double u, double v, double w, const double* board_point) = 0;
   // Adds the view's cost 1/2 |r|^2 at `pose` and, unless jtj is null, J^T J (its
   // upper triangle) and J^T r over the pose (angle-axis, then translation) to jtj
   // and jtr.  False
   // where a point has no image.
   virtual bool Accumulate(const double* pose, double* cost, Matrix6* jtj, Vector6* jtr) const = 0;
-  // The weighted residuals w (observed - projected), two per corner in the order added.
+  // The weighted residuals w (observed - projected), two per corner in order.
   virtual bool Residuals(const double* pose, double* r) const = 0;
+  // Adds the squares of the unweighted residuals (observed - projected) at `pose`.
+  virtual bool SquaredError(const double* pose, double* sum) const = 0;
 };
 
 // The residuals of ViewPoseError (residuals.h), with the Jacobian chained by
-// hand: d(R X)/dw = -[R X]_x J_l(w) in closed form, Jets (3 wide) only over the
-// camera point through the projection.
+// hand: the projection's by Lens::ProjectWithJacobian (closed form), and
+// d(R X)/dw = -[R X]_x J_l(w).  The normal equations are summed over the left
+// perturbation of the rotation (-[R X]_x alone) and taken through J_l once per
+// view: J_l is the same for every corner, and the product per corner was a
+// third of the refit's arithmetic.
 template <class Lens>
 class PoseViewOf final : public PoseView {
  public:
-  PoseViewOf(const double* intrinsics, const double* rig) : has_rig_(rig != nullptr) {
-    for (int i = 0; i < Lens::kNumParams; ++i) {
-      intrinsics_[i] = intrinsics[i];
-      jet_intrinsics_[i] = J3(intrinsics[i]);
-    }
+  // `corners` must outlive the view.
+  PoseViewOf(const double* intrinsics, const double* rig, const std::vector<PoseCorner>& corners)
+      : has_rig_(rig != nullptr), obs_(corners) {
+    for (int i = 0; i < Lens::kNumParams; ++i) intrinsics_[i] = intrinsics[i];
     if (has_rig_) {
       double unused[9];
       RotationWithLeftJacobian(rig, rig_rotation_, unused);
@@ -53,57 +60,68 @@ class PoseViewOf final : public PoseView {
     }
   }
 
-  void Add(double u, double v, double w, const double* board_point) override {
-    obs_.push_back({u, v, w, {board_point[0], board_point[1], board_point[2]}});
-  }
-
-  bool Accumulate(const double* pose, double* cost, Matrix6* jtj, Vector6* jtr) const override {
+  // Flattened: with the projection inlined, its unused Jacobian over the
+  // intrinsics is never computed.
+  [[gnu::flatten]] bool Accumulate(const double* pose, double* cost, Matrix6* jtj,
+                                   Vector6* jtr) const override {
     double R[9], Jl[9];
     RotationWithLeftJacobian(pose, R, Jl);
-    for (const Obs& o : obs_) {
-      double y[3], cam[3];
-      Camera(R, pose, o.x, y, cam);
-      if (jtj == nullptr) {
-        double uv[2];
+    if (jtj == nullptr) {
+      for (const PoseCorner& o : obs_) {
+        double y[3], cam[3], uv[2];
+        Camera(R, pose, o.x, y, cam);
         if (!Lens::Project(intrinsics_, cam, uv)) return false;
         const double e0 = o.w * (o.u - uv[0]), e1 = o.w * (o.v - uv[1]);
         *cost += 0.5 * (e0 * e0 + e1 * e1);
-        continue;
       }
-      J3 pc[3], uv[2];
-      for (int k = 0; k < 3; ++k) pc[k] = J3(cam[k], k);
-      if (!Lens::Project(jet_intrinsics_, pc, uv)) return false;
-      const double e[2] = {o.w * (o.u - uv[0].a), o.w * (o.v - uv[1].a)};
-      *cost += 0.5 * (e[0] * e[0] + e[1] * e[1]);
-      // dr/dxc = -w duv/dcam Rk (Rk the identity without a rig).
-      double dxc[2][3];
-      for (int a = 0; a < 2; ++a) {
-        for (int c = 0; c < 3; ++c) {
-          dxc[a][c] = has_rig_ ? -o.w * (uv[a].v[0] * rig_rotation_[c] +
-                                         uv[a].v[1] * rig_rotation_[3 + c] +
-                                         uv[a].v[2] * rig_rotation_[6 + c])
-                               : -o.w * uv[a].v[c];
-        }
-      }
-      // dxc/dw = -[y]_x J_l, dxc/dt = I.
-      const double S[9] = {0, y[2], -y[1], -y[2], 0, y[0], y[1], -y[0], 0};
-      double D[9];
-      for (int m = 0; m < 3; ++m)
-        for (int c = 0; c < 3; ++c)
-          D[3 * m + c] = S[3 * m] * Jl[c] + S[3 * m + 1] * Jl[3 + c] + S[3 * m + 2] * Jl[6 + c];
-      for (int a = 0; a < 2; ++a) {
-        double row[6];
-        for (int c = 0; c < 3; ++c) {
-          row[c] = dxc[a][0] * D[c] + dxc[a][1] * D[3 + c] + dxc[a][2] * D[6 + c];
-          row[3 + c] = dxc[a][c];
-        }
-        // The upper triangle only; FrameNormals mirrors it.
-        for (int i = 0; i < 6; ++i) {
-          for (int k = i; k < 6; ++k) (*jtj)(i, k) += row[i] * row[k];
-          (*jtr)(i) += row[i] * e[a];
-        }
-      }
+      return true;
     }
+    constexpr int n = Lens::kNumParams + 3;
+    // Over (left rotation perturbation, translation): the upper triangle of
+    // J^T J row by row, then J^T r, as plain sums the compiler keeps in registers.
+    double sums[27] = {};
+    for (const PoseCorner& o : obs_) {
+      double y[3], cam[3], uv[2], J[2 * n];
+      Camera(R, pose, o.x, y, cam);
+      if (!Lens::ProjectWithJacobian(intrinsics_, cam, uv, J)) return false;
+      const double e[2] = {o.w * (o.u - uv[0]), o.w * (o.v - uv[1])};
+      *cost += 0.5 * (e[0] * e[0] + e[1] * e[1]);
+      double row[2][6];
+      for (int a = 0; a < 2; ++a) {
+        // dr/dxc = -w duv/dcam Rk (Rk the identity without a rig).
+        const double* dcam = J + a * n + Lens::kNumParams;
+        double* d = row[a] + 3;
+        for (int c = 0; c < 3; ++c) {
+          d[c] = has_rig_ ? -o.w * (dcam[0] * rig_rotation_[c] + dcam[1] * rig_rotation_[3 + c] +
+                                    dcam[2] * rig_rotation_[6 + c])
+                          : -o.w * dcam[c];
+        }
+        // dxc/dw_left = -[y]_x, dxc/dt = I.
+        row[a][0] = d[2] * y[1] - d[1] * y[2];
+        row[a][1] = d[0] * y[2] - d[2] * y[0];
+        row[a][2] = d[1] * y[0] - d[0] * y[1];
+      }
+      int at = 0;
+#pragma GCC unroll 6
+      for (int i = 0; i < 6; ++i) {
+#pragma GCC unroll 6
+        for (int k = i; k < 6; ++k) sums[at++] += row[0][i] * row[0][k] + row[1][i] * row[1][k];
+      }
+#pragma GCC unroll 6
+      for (int i = 0; i < 6; ++i) sums[21 + i] += row[0][i] * e[0] + row[1][i] * e[1];
+    }
+    Matrix6 A;
+    Vector6 g;
+    for (int i = 0, at = 0; i < 6; ++i) {
+      for (int k = i; k < 6; ++k, ++at) A(i, k) = A(k, i) = sums[at];
+      g(i) = sums[21 + i];
+    }
+    // Through dw_left/dw = J_l: A <- T^T A T, g <- T^T g with T = diag(J_l, I).
+    const Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> L(Jl);
+    Matrix6 T = Matrix6::Identity();
+    T.topLeftCorner<3, 3>() = L;
+    *jtj += T.transpose() * A * T;
+    *jtr += T.transpose() * g;
     return true;
   }
 
@@ -111,7 +129,7 @@ class PoseViewOf final : public PoseView {
     double R[9], Jl[9];
     RotationWithLeftJacobian(pose, R, Jl);
     for (size_t i = 0; i < obs_.size(); ++i) {
-      const Obs& o = obs_[i];
+      const PoseCorner& o = obs_[i];
       double y[3], cam[3], uv[2];
       Camera(R, pose, o.x, y, cam);
       if (!Lens::Project(intrinsics_, cam, uv)) return false;
@@ -121,13 +139,20 @@ class PoseViewOf final : public PoseView {
     return true;
   }
 
- private:
-  using J3 = ceres::Jet<double, 3>;
-  struct Obs {
-    double u, v, w;
-    double x[3];
-  };
+  bool SquaredError(const double* pose, double* sum) const override {
+    double R[9], Jl[9];
+    RotationWithLeftJacobian(pose, R, Jl);
+    for (const PoseCorner& o : obs_) {
+      double y[3], cam[3], uv[2];
+      Camera(R, pose, o.x, y, cam);
+      if (!Lens::Project(intrinsics_, cam, uv)) return false;
+      const double du = o.u - uv[0], dv = o.v - uv[1];
+      *sum += du * du + dv * dv;
+    }
+    return true;
+  }
 
+ private:
   // y = R x, and the point in the camera: R x + t, through the rig if any.
   void Camera(const double* R, const double* pose, const double* x, double* y,
               double* cam) const {
@@ -145,10 +170,9 @@ class PoseViewOf final : public PoseView {
 
   bool has_rig_;
   double intrinsics_[Lens::kNumParams];
-  J3 jet_intrinsics_[Lens::kNumParams];
   double rig_rotation_[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
   double rig_translation_[3] = {0, 0, 0};
-  std::vector<Obs> obs_;
+  const std::vector<PoseCorner>& obs_;
 };
 
 // How one frame's refit ended.

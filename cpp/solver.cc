@@ -909,16 +909,47 @@ void DirectJacobian(const Assembled& a, const double* base, size_t num_observati
   out.col_param = f.params;
 }
 
-// The frames of a pose-only refit, each with its views (one per camera that
-// sees it) and the observations behind each view, in the view's order.
-struct FrameViews {
-  std::vector<std::vector<std::unique_ptr<PoseView>>> views;
-  std::vector<std::vector<std::vector<uint32_t>>> observations;
+// One camera's corners in one frame of a pose-only refit, and the
+// observations they came from, in order.
+struct ViewCorners {
+  uint32_t camera;
+  std::vector<PoseCorner> corners;
+  std::vector<uint32_t> observations;
 };
 
+// Per frame, its views (one per camera that sees it).
+using FrameCorners = std::vector<std::vector<ViewCorners>>;
+
+using MakePoseViewFn = std::unique_ptr<PoseView> (*)(const double*, const double*,
+                                                     const std::vector<PoseCorner>&);
+
 template <class Lens>
-PoseView* MakePoseView(const double* intrinsics, const double* rig) {
-  return new PoseViewOf<Lens>(intrinsics, rig);
+std::unique_ptr<PoseView> MakePoseView(const double* intrinsics, const double* rig,
+                                       const std::vector<PoseCorner>& corners) {
+  return std::make_unique<PoseViewOf<Lens>>(intrinsics, rig, corners);
+}
+
+// Each camera's view maker, by its lens model.
+std::vector<MakePoseViewFn> PoseViewMakers(const ffi::ProblemData& d) {
+  std::vector<MakePoseViewFn> make;
+  for (size_t k = 0; k < d.num_cameras; ++k) {
+    DispatchLens(std::string(d.lens_models[k]),
+                 [&](auto lens) { make.push_back(&MakePoseView<decltype(lens)>); });
+  }
+  return make;
+}
+
+// A frame's views under camera k's `intrinsics[k]` and rig pose `rigs[k]`.
+std::vector<std::unique_ptr<PoseView>> FrameViews(const std::vector<ViewCorners>& frame,
+                                                  const std::vector<MakePoseViewFn>& make,
+                                                  const std::vector<const double*>& intrinsics,
+                                                  const std::vector<const double*>& rigs) {
+  std::vector<std::unique_ptr<PoseView>> views;
+  views.reserve(frame.size());
+  for (const ViewCorners& v : frame) {
+    views.push_back(make[v.camera](intrinsics[v.camera], rigs[v.camera], v.corners));
+  }
+  return views;
 }
 
 // Refuses problem data that are not a pose-only refit without a loss: then
@@ -935,16 +966,8 @@ void RequirePoseOnly(const ffi::ProblemData& d, const ffi::SolveOptions& o) {
 // Groups the observations by frame and camera, each board point evaluated
 // once under the held board model.
 template <class Board>
-FrameViews CollectFrames(const ffi::ProblemData& d, Params& p) {
-  FrameViews f;
-  f.views.resize(d.num_frames);
-  f.observations.resize(d.num_frames);
-  std::vector<PoseView* (*)(const double*, const double*)> make;
-  for (size_t k = 0; k < d.num_cameras; ++k) {
-    DispatchLens(std::string(d.lens_models[k]), [&](auto lens) {
-      make.push_back(&MakePoseView<decltype(lens)>);
-    });
-  }
+FrameCorners CollectFrames(const ffi::ProblemData& d, Params& p) {
+  FrameCorners f(d.num_frames);
   // Per frame, the view of camera k (index into its views), -1 when none yet.
   std::vector<std::vector<int>> slot(d.num_frames, std::vector<int>(d.num_cameras, -1));
   const size_t n = d.obs_uv.size() / 2;
@@ -952,40 +975,49 @@ FrameViews CollectFrames(const ffi::ProblemData& d, Params& p) {
     const uint32_t cam = d.obs_camera[i], frame = d.obs_frame[i], corner = d.obs_corner[i];
     int& s = slot[frame][cam];
     if (s < 0) {
-      s = static_cast<int>(f.views[frame].size());
-      f.views[frame].emplace_back(make[cam](p.intrinsics[cam], cam > 0 ? p.camera_poses[cam] : nullptr));
-      f.observations[frame].emplace_back();
+      s = static_cast<int>(f[frame].size());
+      f[frame].push_back({cam, {}, {}});
     }
-    double point[3];
+    PoseCorner c{d.obs_uv[2 * i], d.obs_uv[2 * i + 1], d.obs_weight.empty() ? 1.0 : d.obs_weight[i], {}};
     const double* correction = Board::kCornerSize > 0 ? p.Correction(corner) : nullptr;
-    Board::Point(&d.board[3 * corner], p.Frame(frame) + kPoseSize, correction, point);
-    const double w = d.obs_weight.empty() ? 1.0 : d.obs_weight[i];
-    f.views[frame][s]->Add(d.obs_uv[2 * i], d.obs_uv[2 * i + 1], w, point);
-    f.observations[frame][s].push_back(static_cast<uint32_t>(i));
+    Board::Point(&d.board[3 * corner], p.Frame(frame) + kPoseSize, correction, c.x);
+    f[frame][s].corners.push_back(c);
+    f[frame][s].observations.push_back(static_cast<uint32_t>(i));
   }
   return f;
 }
 
+// Each camera's rig pose (none for camera 0, the rig's reference).
+std::vector<const double*> RigPoses(const std::vector<double*>& camera_poses) {
+  std::vector<const double*> rigs(camera_poses.begin(), camera_poses.end());
+  if (!rigs.empty()) rigs[0] = nullptr;
+  return rigs;
+}
+
 // Refits every frame's pose on its own; the report as a joint solve's.
-ffi::SolveReport RefitEachFrame(FrameViews& f, const ffi::ProblemData& d, const ffi::SolveOptions& o,
-                             Params& p) {
+ffi::SolveReport RefitEachFrame(const FrameCorners& f, const ffi::ProblemData& d,
+                                const ffi::SolveOptions& o, Params& p) {
   ffi::SolveReport report;
   report.usable = true;
   report.converged = true;
   report.linear_solver = rust::String("per-frame dense normal equations");
+  const std::vector<MakePoseViewFn> make = PoseViewMakers(d);
+  const std::vector<const double*> intrinsics(p.intrinsics.begin(), p.intrinsics.end());
+  const std::vector<const double*> rigs = RigPoses(p.camera_poses);
   std::vector<double> residuals(d.obs_uv.size(), 0.0), r;
-  for (size_t j = 0; j < f.views.size(); ++j) {
-    if (f.views[j].empty()) continue;
-    const PoseRefitResult fit = RefitFramePose(f.views[j], p.Frame(j), o.max_iterations);
+  for (size_t j = 0; j < f.size(); ++j) {
+    if (f[j].empty()) continue;
+    const auto views = FrameViews(f[j], make, intrinsics, rigs);
+    const PoseRefitResult fit = RefitFramePose(views, p.Frame(j), o.max_iterations);
     report.usable = report.usable && fit.ok;
     report.converged = report.converged && fit.converged;
     report.iterations = std::max(report.iterations, fit.iterations);
     report.initial_cost += fit.initial_cost;
     report.final_cost += fit.final_cost;
-    for (size_t v = 0; v < f.views[j].size() && report.usable; ++v) {
-      const std::vector<uint32_t>& obs = f.observations[j][v];
+    for (size_t v = 0; v < views.size() && report.usable; ++v) {
+      const std::vector<uint32_t>& obs = f[j][v].observations;
       r.assign(2 * obs.size(), 0.0);
-      report.usable = f.views[j][v]->Residuals(p.Frame(j), r.data());
+      report.usable = views[v]->Residuals(p.Frame(j), r.data());
       for (size_t k = 0; k < obs.size(); ++k) {
         residuals[2 * obs[k]] = r[2 * k];
         residuals[2 * obs[k] + 1] = r[2 * k + 1];
@@ -1006,6 +1038,75 @@ ffi::SolveReport RefitEachFrame(FrameViews& f, const ffi::ProblemData& d, const 
 }  // namespace
 
 namespace ffi {
+
+// What a prepared pose refit keeps: everything but the intrinsics.
+struct PoseRefitState {
+  FrameCorners frames;
+  std::vector<double> start_poses;  // kPoseSize per frame
+  std::vector<MakePoseViewFn> make;
+  std::vector<size_t> num_params;  // per camera
+  std::vector<double> rig_poses;   // kPoseSize per camera
+  int max_iterations = 0;
+};
+
+PoseRefit::PoseRefit(std::unique_ptr<const PoseRefitState> state) : state_(std::move(state)) {}
+PoseRefit::~PoseRefit() = default;
+
+double PoseRefit::rmse_px(rust::Slice<const double> intrinsics) const {
+  const PoseRefitState& s = *state_;
+  std::vector<const double*> lens(s.num_params.size()), rigs(s.num_params.size(), nullptr);
+  size_t at = 0;
+  for (size_t k = 0; k < s.num_params.size(); ++k) {
+    lens[k] = intrinsics.data() + at;
+    at += s.num_params[k];
+    if (k > 0) rigs[k] = &s.rig_poses[kPoseSize * k];
+  }
+  if (at != intrinsics.size()) {
+    Fail("the refit's intrinsics have " + std::to_string(intrinsics.size()) + " values, expected " +
+         std::to_string(at));
+  }
+  double sum = 0.0;
+  size_t corners = 0;
+  for (size_t j = 0; j < s.frames.size(); ++j) {
+    if (s.frames[j].empty()) continue;
+    double pose[kPoseSize];
+    std::copy_n(&s.start_poses[kPoseSize * j], kPoseSize, pose);
+    const auto views = FrameViews(s.frames[j], s.make, lens, rigs);
+    bool ok = RefitFramePose(views, pose, s.max_iterations).ok;
+    for (size_t v = 0; v < views.size() && ok; ++v) {
+      ok = views[v]->SquaredError(pose, &sum);
+      corners += s.frames[j][v].corners.size();
+    }
+    if (!ok || !std::isfinite(sum)) {
+      Fail("frame " + std::to_string(j) + ": a board point has no image under the held intrinsics");
+    }
+  }
+  if (corners == 0) Fail("the refit has no observation");
+  return std::sqrt(sum / static_cast<double>(corners));
+}
+
+std::unique_ptr<PoseRefit> prepare_pose_refit(const ProblemData& data, const SolveOptions& options) {
+  ValidateProblem(data, options);
+  Params params(data);
+  auto state = std::make_unique<PoseRefitState>();
+  DispatchBoard(std::string(data.board_model), [&](auto board) {
+    using Board = decltype(board);
+    RequirePoseOnly<Board>(data, options);
+    state->frames = CollectFrames<Board>(data, params);
+  });
+  for (size_t j = 0; j < data.num_frames; ++j) {
+    state->start_poses.insert(state->start_poses.end(), params.Frame(j), params.Frame(j) + kPoseSize);
+  }
+  state->make = PoseViewMakers(data);
+  for (size_t k = 0; k < data.num_cameras; ++k) {
+    DispatchLens(std::string(data.lens_models[k]),
+                 [&](auto lens) { state->num_params.push_back(decltype(lens)::kNumParams); });
+    state->rig_poses.insert(state->rig_poses.end(), params.camera_poses[k],
+                            params.camera_poses[k] + kPoseSize);
+  }
+  state->max_iterations = options.max_iterations;
+  return std::make_unique<PoseRefit>(std::move(state));
+}
 
 SolveReport solve(ProblemData& data, const SolveOptions& options) {
   const auto start = std::chrono::steady_clock::now();
@@ -1074,7 +1175,7 @@ SolveReport refit_poses(ProblemData& data, const SolveOptions& options) {
   DispatchBoard(std::string(data.board_model), [&](auto board) {
     using Board = decltype(board);
     RequirePoseOnly<Board>(data, options);
-    FrameViews frames = CollectFrames<Board>(data, params);
+    const FrameCorners frames = CollectFrames<Board>(data, params);
     report = RefitEachFrame(frames, data, options, params);
   });
   for (double v : params.storage) report.usable = report.usable && std::isfinite(v);

@@ -16,7 +16,7 @@ use crate::model::synthetic::Truth;
 use crate::model::target::Target;
 use crate::model::uncertainty::CameraUncertainty;
 use crate::solver::calibrate::{calibrate, Calibration, Request};
-use crate::solver::problem::{rmse, Hold, Problem, SolverSettings};
+use crate::solver::problem::{rmse, Hold, PreparedRefit, Problem, SolverSettings};
 use crate::solver::select::calibrate_auto;
 use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -370,6 +370,9 @@ pub struct Setup {
     /// Per camera, the mapping-error grid's rays under the reference and the
     /// truth: the same for every subset, so unprojected once.
     grids: Vec<[Option<Rays>; 2]>,
+    /// Per camera, its test-error refit prepared once (empty without a
+    /// reference); a camera it cannot be prepared for has the reason.
+    test_errors: Vec<std::result::Result<TestError, String>>,
     /// The reference set, until its calibration is installed.
     reference_data: Option<Dataset>,
     /// `[sfm]`, whose scene may need the reference calibration.
@@ -451,6 +454,7 @@ pub fn plan(config: &Config, protocol: &ProtocolConfig) -> Result<Plan> {
     }
     Ok(Plan(Setup {
         grids: Vec::new(),
+        test_errors: Vec::new(),
         header,
         dataset,
         truth,
@@ -535,17 +539,63 @@ fn record_bends(row: &mut Row, c: &Calibration) {
 /// held.  The refit is plain least squares: the reference set is clean, and the
 /// RMSE is a least-squares figure.  With `settings.per_corner_blocks` it runs on
 /// the previous path (one Ceres problem over all frames), which converges to the
-/// same optimum within its solver tolerances.
+/// same optimum within its solver tolerances.  The protocol prepares the refit
+/// once per camera instead ([`TestError`]).
 pub fn test_rmse(
     reference: &Calibration,
     k: usize,
     intrinsics: &Intrinsics,
     settings: &SolverSettings,
 ) -> Result<f64> {
-    let settings = &SolverSettings {
+    if !settings.per_corner_blocks {
+        return TestError::new(reference, k, settings)?.rmse_px(intrinsics);
+    }
+    let settings = &refit_settings(settings);
+    let dataset = reference_views(reference, k)?;
+    let mut state = refit_start(reference, k, intrinsics);
+    let problem = refit_problem(reference, &dataset);
+    let report = problem.solve(&mut state, settings)?;
+    if report.usable && !report.residuals.is_empty() {
+        return Ok(rmse(&report.residuals));
+    }
+    Ok(rmse(&problem.evaluate(&state, settings, false)?.residuals))
+}
+
+/// The test error of one reference camera, its refit prepared once and run for
+/// every calibration measured against it: only the board poses are free and
+/// there is no loss, so every frame is its own 6-parameter problem, refitted on
+/// its own from the reference's pose (the joint Ceres solve of
+/// [`test_rmse`]'s previous path is what it is tested against).
+pub struct TestError {
+    refit: PreparedRefit,
+}
+
+impl TestError {
+    /// Prepares camera `k`'s refit on the reference set.
+    pub fn new(reference: &Calibration, k: usize, settings: &SolverSettings) -> Result<Self> {
+        let dataset = reference_views(reference, k)?;
+        let state = refit_start(reference, k, &reference.state.intrinsics[k]);
+        let refit = refit_problem(reference, &dataset)
+            .prepare_pose_refit(&state, &refit_settings(settings))?;
+        Ok(TestError { refit })
+    }
+
+    /// `test_rmse_px` under `intrinsics`.
+    pub fn rmse_px(&self, intrinsics: &Intrinsics) -> Result<f64> {
+        self.refit.rmse_px(std::slice::from_ref(intrinsics))
+    }
+}
+
+/// The refit's settings: plain least squares.
+fn refit_settings(settings: &SolverSettings) -> SolverSettings {
+    SolverSettings {
         loss: crate::solver::problem::Loss::None,
         ..settings.clone()
-    };
+    }
+}
+
+/// Camera `k`'s views of the reference set, as a one-camera dataset.
+fn reference_views(reference: &Calibration, k: usize) -> Result<Dataset> {
     let r = &reference.dataset;
     let dataset = Dataset {
         cameras: vec![r.cameras[k].clone()],
@@ -563,8 +613,13 @@ pub fn test_rmse(
             r.cameras[k].name
         )));
     }
+    Ok(dataset)
+}
+
+/// The refit's start: the reference's board poses seen from camera `k`.
+fn refit_start(reference: &Calibration, k: usize, intrinsics: &Intrinsics) -> State {
     let pi = reference.state.camera_poses[k];
-    let mut state = State {
+    State {
         intrinsics: vec![*intrinsics],
         camera_poses: vec![crate::model::pose::Pose::identity()],
         frame_poses: reference
@@ -574,9 +629,13 @@ pub fn test_rmse(
             .map(|p| pi.compose(p))
             .collect(),
         ..reference.state.clone()
-    };
-    let problem = Problem {
-        dataset: &dataset,
+    }
+}
+
+/// Everything but the board poses held, the reference's static correction among it.
+fn refit_problem<'a>(reference: &Calibration, dataset: &'a Dataset) -> Problem<'a> {
+    Problem {
+        dataset,
         method: Method::Static,
         gauge: reference.gauge.clone(),
         frozen: reference.frozen.clone(),
@@ -586,20 +645,7 @@ pub fn test_rmse(
             corrections: true,
             deformations: true,
         },
-    };
-    // Only the board poses are free and there is no loss: every frame is its own
-    // 6-parameter problem, refitted on its own. The previous path (one Ceres
-    // problem) stays as the reference it is tested against. The solve hands back
-    // its final residuals; evaluating them again would rebuild the problem.
-    let report = if settings.per_corner_blocks {
-        problem.solve(&mut state, settings)?
-    } else {
-        problem.refit_poses(&mut state, settings)?
-    };
-    if report.usable && !report.residuals.is_empty() {
-        return Ok(rmse(&report.residuals));
     }
-    Ok(rmse(&problem.evaluate(&state, settings, false)?.residuals))
 }
 
 impl Setup {
@@ -657,11 +703,18 @@ impl Setup {
                 ]
             })
             .collect();
+        let test_errors = match &reference {
+            None => Vec::new(),
+            Some(r) => (0..self.header.cameras.len())
+                .map(|k| TestError::new(r, k, &self.settings).map_err(|e| e.to_string()))
+                .collect(),
+        };
         Ok(Measures {
             reference,
             reference_info,
             sfm,
             grids,
+            test_errors,
         })
     }
 
@@ -671,6 +724,7 @@ impl Setup {
         self.reference = m.reference;
         self.sfm = m.sfm;
         self.grids = m.grids;
+        self.test_errors = m.test_errors;
         self.reference_data = None;
     }
 
@@ -680,6 +734,7 @@ impl Setup {
             reference: self.reference.as_ref(),
             sfm: self.sfm.as_ref(),
             grids: &self.grids,
+            test_errors: &self.test_errors,
         }
     }
 
@@ -705,15 +760,26 @@ impl Setup {
         let [reference, truth] = &against.grids[k];
         let (mapping, mapping_rot) = errors(reference);
         let (truth, truth_rot) = errors(truth);
-        let test = match against.reference {
+        let measured = match (against.reference, against.test_errors.get(k)) {
+            (None, _) => None,
+            // The previous path (the bench's `PER_CORNER=1`) refits from scratch.
+            (Some(r), _) if self.settings.per_corner_blocks => {
+                Some(test_rmse(r, k, &theta, &self.settings).map_err(|e| e.to_string()))
+            }
+            (Some(_), Some(t)) => Some(
+                t.as_ref()
+                    .map_err(String::clone)
+                    .and_then(|t| t.rmse_px(&theta).map_err(|e| e.to_string())),
+            ),
+            (Some(_), None) => Some(Err("no test-error refit was prepared".to_string())),
+        };
+        let test = match measured {
             None => None,
-            Some(r) => match test_rmse(r, k, &theta, &self.settings) {
-                Ok(e) => finite(e),
-                Err(e) => {
-                    *error = Some(format!("test error of {}: {e}", cam.name));
-                    None
-                }
-            },
+            Some(Ok(e)) => finite(e),
+            Some(Err(e)) => {
+                *error = Some(format!("test error of {}: {e}", cam.name));
+                None
+            }
         };
         CameraRow {
             intrinsics: theta,
@@ -934,6 +1000,7 @@ struct Measures {
     reference_info: Option<ReferenceInfo>,
     sfm: Option<Experiment>,
     grids: Vec<[Option<Rays>; 2]>,
+    test_errors: Vec<std::result::Result<TestError, String>>,
 }
 
 impl Measures {
@@ -942,6 +1009,7 @@ impl Measures {
             reference: self.reference.as_ref(),
             sfm: self.sfm.as_ref(),
             grids: &self.grids,
+            test_errors: &self.test_errors,
         }
     }
 }
@@ -952,6 +1020,7 @@ struct Against<'a> {
     reference: Option<&'a Calibration>,
     sfm: Option<&'a Experiment>,
     grids: &'a [[Option<Rays>; 2]],
+    test_errors: &'a [std::result::Result<TestError, String>],
 }
 
 /// A task in [`Plan::run_beside_reference`]: its row, or its calibration

@@ -169,6 +169,18 @@ pub mod ffi {
         /// loss) frame by frame, in place (`cpp/pose_refit.h`).
         fn refit_poses(data: &mut ProblemData, options: &SolveOptions) -> Result<SolveReport>;
 
+        /// A pose-only refit prepared once and run under many intrinsics
+        /// (`cpp/bridge.h`); it keeps no state between refits.
+        type PoseRefit;
+        /// The RMSE of the unweighted residuals after every frame's pose is
+        /// refitted under `intrinsics` (every camera's, in camera order).
+        fn rmse_px(self: &PoseRefit, intrinsics: &[f64]) -> Result<f64>;
+        /// Prepares the pose-only refit of `data` (checked as `refit_poses` checks it).
+        fn prepare_pose_refit(
+            data: &ProblemData,
+            options: &SolveOptions,
+        ) -> Result<UniquePtr<PoseRefit>>;
+
         /// Evaluates residuals and optionally the Jacobian.
         fn evaluate(
             data: &ProblemData,
@@ -233,6 +245,12 @@ pub mod ffi {
         ) -> Result<f64>;
     }
 }
+
+// SAFETY: a PoseRefit is not changed after it is prepared; `rmse_px` is a
+// const method that keeps all of its working state on its own stack and heap,
+// so the object may move between threads and be shared by several at once.
+unsafe impl Send for ffi::PoseRefit {}
+unsafe impl Sync for ffi::PoseRefit {}
 
 #[cfg(test)]
 #[path = "bridge_tests.rs"]

@@ -3,7 +3,7 @@
 use crate::error::{Error, Result};
 use crate::model::board::{BoardPriors, Method};
 use crate::model::dataset::Dataset;
-use crate::model::lens::LensModel;
+use crate::model::lens::{Intrinsics, LensModel};
 use crate::model::state::Layout;
 pub use crate::model::state::State;
 use crate::model::target::Target;
@@ -417,6 +417,20 @@ impl Problem<'_> {
         self.run(state, settings, ffi::refit_poses, "the pose refit")
     }
 
+    /// Prepares [`Problem::refit_poses`] from `state` for refits under many
+    /// intrinsics ([`PreparedRefit`]); refused where `refit_poses` is.
+    pub fn prepare_pose_refit(
+        &self,
+        state: &State,
+        settings: &SolverSettings,
+    ) -> Result<PreparedRefit> {
+        let layout = self.layout();
+        let data = self.data(state, &layout, settings)?;
+        let refit = ffi::prepare_pose_refit(&data, &settings.options())
+            .map_err(|e| Error::Problem(e.what().to_string()))?;
+        Ok(PreparedRefit { refit })
+    }
+
     /// Runs one of the bridge's solvers on this problem from `state` and unpacks
     /// the result into it; `what` names the solve in the error of an unusable one.
     fn run(
@@ -483,6 +497,27 @@ impl Problem<'_> {
             r[0] /= o.weight;
             r[1] /= o.weight;
         }
+    }
+}
+
+/// A pose-only refit prepared once ([`Problem::prepare_pose_refit`]): the
+/// frames' corners and held board points are kept in C++, and every refit
+/// starts from the same poses, so one serves many threads.
+pub struct PreparedRefit {
+    refit: cxx::UniquePtr<ffi::PoseRefit>,
+}
+
+impl PreparedRefit {
+    /// The RMSE of the unweighted residuals (as [`rmse`] of a refit's
+    /// residuals) after every frame's pose is refitted under `intrinsics`.
+    pub fn rmse_px(&self, intrinsics: &[Intrinsics]) -> Result<f64> {
+        let params: Vec<f64> = intrinsics
+            .iter()
+            .flat_map(|k| k.params().to_vec())
+            .collect();
+        self.refit
+            .rmse_px(&params)
+            .map_err(|e| Error::Solver(format!("the pose refit failed: {}", e.what())))
     }
 }
 
