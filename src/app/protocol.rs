@@ -15,7 +15,7 @@ use crate::model::state::State;
 use crate::model::synthetic::Truth;
 use crate::model::target::Target;
 use crate::model::uncertainty::CameraUncertainty;
-use crate::solver::calibrate::{calibrate, Calibration, Request};
+use crate::solver::calibrate::{calibrate, Calibration, Request, SharedWarmStart};
 use crate::solver::problem::{rmse, Hold, PreparedRefit, Problem, SolverSettings};
 use crate::solver::select::calibrate_auto;
 use rand::{RngCore, SeedableRng};
@@ -798,12 +798,15 @@ impl Setup {
 
     /// Runs one subset × method task; failures become a row with the reason.
     pub fn task(&self, t: usize) -> Row {
-        self.row(&self.against(), self.calibrate_task(t))
+        self.row(
+            &self.against(),
+            self.calibrate_task(t, &SharedWarmStart::default()),
+        )
     }
 
     /// The calibration of task `t`, and the part of its row that does not need
-    /// the reference calibration.
-    fn calibrate_task(&self, t: usize) -> Calibrated {
+    /// the reference calibration; `warm` is its subset's (see [`Setup::subset_groups`]).
+    fn calibrate_task(&self, t: usize, warm: &SharedWarmStart) -> Calibrated {
         let (subset, method, auto) = match self.header.task(t) {
             Task::Fixed(s, m) => (s, m, false),
             Task::Auto(s) => (s, Method::Standard, true),
@@ -844,7 +847,7 @@ impl Setup {
                 };
                 calibrate_auto(&data, &request, &settings, &|| {})
             }
-            _ => calibrate(&data, &request),
+            _ => warm.calibrate(&data, &request),
         };
         let mut c = match solved {
             Ok(c) => c,
@@ -897,14 +900,41 @@ impl Setup {
     /// Runs the tasks of `shard` (all without one) on the current rayon pool,
     /// calling `tick` after each; rows come back in task order.
     pub fn run(&self, shard: Option<Shard>, tick: &(dyn Fn() + Sync)) -> Vec<Row> {
-        self.tasks(shard)
+        self.subset_groups(shard)
             .par_iter()
-            .map(|&t| {
-                let row = self.task(t);
-                tick();
-                row
+            .flat_map_iter(|group| {
+                let warm = SharedWarmStart::default();
+                let against = self.against();
+                group
+                    .iter()
+                    .map(|&t| {
+                        let row = self.row(&against, self.calibrate_task(t, &warm));
+                        tick();
+                        row
+                    })
+                    .collect::<Vec<_>>()
             })
             .collect()
+    }
+
+    /// The tasks of `shard` in task order, grouped by subset: a group runs on one
+    /// thread, its methods one after another, sharing the subset's warm start
+    /// (the `standard` solve every deformation method starts from), which is
+    /// dropped with the group.
+    fn subset_groups(&self, shard: Option<Shard>) -> Vec<Vec<usize>> {
+        let mut groups: Vec<Vec<usize>> = Vec::new();
+        let mut last = None;
+        for t in self.tasks(shard) {
+            let subset = match self.header.task(t) {
+                Task::Fixed(s, _) | Task::Auto(s) => s,
+            };
+            match groups.last_mut() {
+                Some(g) if last == Some(subset) => g.push(t),
+                _ => groups.push(vec![t]),
+            }
+            last = Some(subset);
+        }
+        groups
     }
 
     /// The tasks of `shard`, all without one.
@@ -948,7 +978,7 @@ impl Plan {
         tick: &(dyn Fn() + Sync),
     ) -> Result<(Setup, Vec<Row>)> {
         let Plan(mut setup) = self;
-        let tasks = setup.tasks(shard);
+        let groups = setup.subset_groups(shard);
         let measures = OnceLock::new();
         let failed = AtomicBool::new(false);
         let (measured, parts) = rayon::join(
@@ -961,18 +991,22 @@ impl Plan {
                 m.map(|m| measures.set(m).ok())
             },
             || {
-                tasks
+                groups
                     .par_iter()
-                    .map(|&t| {
-                        if failed.load(Ordering::Relaxed) {
-                            return Part::Skipped;
-                        }
-                        let c = setup.calibrate_task(t);
-                        tick();
-                        match measures.get() {
-                            Some(m) => Part::Row(setup.row(&m.against(), c)),
-                            None => Part::Pending(c),
-                        }
+                    .flat_map_iter(|group| {
+                        let warm = SharedWarmStart::default();
+                        let part = |t| {
+                            if failed.load(Ordering::Relaxed) {
+                                return Part::Skipped;
+                            }
+                            let c = setup.calibrate_task(t, &warm);
+                            tick();
+                            match measures.get() {
+                                Some(m) => Part::Row(setup.row(&m.against(), c)),
+                                None => Part::Pending(c),
+                            }
+                        };
+                        group.iter().map(|&t| part(t)).collect::<Vec<_>>()
                     })
                     .collect::<Vec<_>>()
             },

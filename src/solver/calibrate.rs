@@ -17,6 +17,7 @@ use crate::solver::problem::{
 use crate::solver::{auto_prior, repose, robust};
 use nalgebra::{Matrix3, Vector2};
 use std::collections::HashMap;
+use std::sync::OnceLock;
 use std::time::Instant;
 
 /// Fewest corners an image needs to enter the calibration (a homography needs four).
@@ -604,12 +605,18 @@ fn with_auto_prior(
 /// stage, or `standard` again once the noise that weights the lens prior is
 /// estimated.
 fn warm_start_settings(request: &Request, dataset: &Dataset) -> SolverSettings {
-    if request.method == Method::Standard && !lens_prior_reweighted(request, dataset) {
-        request.settings.clone()
-    } else {
+    if warm_start_is_loose(request, dataset) {
         // A warm start only needs to be close: the final stage polishes it.
         loose(&request.settings, WARM_START_TOLERANCE)
+    } else {
+        request.settings.clone()
     }
+}
+
+/// Whether a later solve polishes the first `standard` solve (see
+/// [`warm_start_settings`]), which is then loose and the same for every method.
+fn warm_start_is_loose(request: &Request, dataset: &Dataset) -> bool {
+    request.method != Method::Standard || lens_prior_reweighted(request, dataset)
 }
 
 /// `settings` with function and parameter tolerances no tighter than `tolerance`.
@@ -855,7 +862,11 @@ fn with_stray_frames_reposed(
 
 /// Runs the whole pipeline on one dataset.
 pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {
-    let mut c = fit(dataset, request)?;
+    with_covariance(fit(dataset, request)?)
+}
+
+/// A fit with its unit covariance.
+fn with_covariance(mut c: Calibration) -> Result<Calibration> {
     c.covariance = crate::solver::covariance::unit_covariance(&c.problem(), &c.state, &c.settings);
     Ok(c)
 }
@@ -863,10 +874,34 @@ pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {
 /// [`calibrate`] without the covariance, for fits only their parameters matter
 /// of (`auto`'s cross-validation folds).
 pub fn fit(dataset: &Dataset, request: &Request) -> Result<Calibration> {
-    let request_in = request;
+    fit_from(warm_start(dataset, request)?, request)
+}
+
+/// What a calibration has once its first `standard` solve is done: the data
+/// kept, the initialisation, and that solve from one or two starts. Every
+/// deformation method computes the same one from the same data (see
+/// [`warm_start_settings`]), so [`SharedWarmStart`] computes it once for them.
+#[derive(Debug, Clone)]
+struct WarmStart {
+    /// The dataset and settings it was computed from, to recognise its users.
+    input: Dataset,
+    settings: SolverSettings,
+    dataset: Dataset,
+    state: State,
+    init_fallback: bool,
+    initial_intrinsics: Vec<Intrinsics>,
+    warnings: Vec<String>,
+    stages: Vec<Stage>,
+    report: SolveReport,
+    seconds: f64,
+}
+
+/// [`fit`]'s first part: the data checked, the initialisation and the first
+/// `standard` solve (stray frames re-posed, a second start where the lens has one).
+fn warm_start(input: &Dataset, request: &Request) -> Result<WarmStart> {
     let start = Instant::now();
     let mut warnings = Vec::new();
-    let dataset = robust::drop_outside_image(dataset, &mut warnings)?;
+    let dataset = robust::drop_outside_image(input, &mut warnings)?;
     let dataset = robust::drop_inconsistent_views(&dataset, &mut warnings)?;
     let (dataset, mut state, init_fallback) = initialise(&dataset, &mut warnings)?;
     coverage_warnings(&dataset, &mut warnings);
@@ -888,7 +923,73 @@ pub fn fit(dataset: &Dataset, request: &Request) -> Result<Calibration> {
         request,
         &mut stages,
     )?;
+    Ok(WarmStart {
+        input: input.clone(),
+        settings: warm,
+        dataset,
+        state,
+        init_fallback,
+        initial_intrinsics,
+        warnings,
+        stages,
+        report,
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
 
+/// One warm start per dataset, computed by the first calibration that can use
+/// it and then shared by the others: the deformation methods of one dataset
+/// (the protocol's methods of a subset, `auto`'s candidates) start from the same
+/// `standard` solve. Each result is, bit for bit, the one [`fit`] gives (only
+/// its `seconds` differ), since the shared part is the same computation.
+#[derive(Debug, Default)]
+pub struct SharedWarmStart(OnceLock<Option<WarmStart>>);
+
+impl SharedWarmStart {
+    /// [`fit`] of `dataset`, from the shared warm start where `request` starts
+    /// from a loose one; `dataset` must be the same every call.
+    pub fn fit(&self, dataset: &Dataset, request: &Request) -> Result<Calibration> {
+        if !warm_start_is_loose(request, dataset) {
+            // Its first solve is the answer: nothing another method can share.
+            return fit(dataset, request);
+        }
+        // The closure solves on this thread (no rayon inside), so a thread that
+        // waits here waits for a solve under way, never for one queued behind it.
+        let shared = self.0.get_or_init(|| warm_start(dataset, request).ok());
+        match shared {
+            Some(w)
+                if w.settings == warm_start_settings(request, dataset) && w.input == *dataset =>
+            {
+                fit_from(w.clone(), request)
+            }
+            // A failed warm start fails again with its own error.
+            _ => fit(dataset, request),
+        }
+    }
+
+    /// [`calibrate`] of `dataset` through [`SharedWarmStart::fit`].
+    pub fn calibrate(&self, dataset: &Dataset, request: &Request) -> Result<Calibration> {
+        with_covariance(self.fit(dataset, request)?)
+    }
+}
+
+/// [`fit`]'s second part: the method's own solve from the warm start, the
+/// priors, outlier rejection and the warnings.
+fn fit_from(warm: WarmStart, request: &Request) -> Result<Calibration> {
+    let request_in = request;
+    let start = Instant::now();
+    let WarmStart {
+        dataset,
+        mut state,
+        init_fallback,
+        initial_intrinsics,
+        mut warnings,
+        mut stages,
+        report,
+        seconds: warm_seconds,
+        ..
+    } = warm;
+    let standard = Problem::standard(&dataset);
     let mut request = with_prior_noise(request, &dataset, &report.residuals);
     // The stage whose result is kept: not always the last one recorded (a second
     // start that was not kept comes after the first start's).
@@ -968,7 +1069,7 @@ pub fn fit(dataset: &Dataset, request: &Request) -> Result<Calibration> {
         gauge,
         frozen,
         warnings,
-        seconds: start.elapsed().as_secs_f64(),
+        seconds: warm_seconds + start.elapsed().as_secs_f64(),
         settings: request.settings.clone(),
         rejected,
         detector_noise_px: None,
@@ -1144,5 +1245,94 @@ mod tests {
             }
         }
         assert!(stopped_early >= 2, "the looser solve never sufficed");
+    }
+
+    /// What a shared warm start gives each method is what `fit` gives it, bit for
+    /// bit (only the timings may differ), with the warm start computed once: the
+    /// methods after the first carry its very stages, timings included. A
+    /// `standard` request does not use it; another dataset, or a warm start that
+    /// failed, is fitted on its own.
+    #[test]
+    fn a_shared_warm_start_gives_each_method_what_fit_gives() {
+        let sets = [
+            (LensModel::Radial3, 12, 3),
+            (LensModel::DoubleSphere, 12, 4),
+        ];
+        for (model, images, seed) in sets {
+            let (dataset, _) = Generator::new(Preset::T2, Some(images), seed)
+                .with_models(&[model])
+                .generate();
+            let request = |method| Request {
+                method,
+                settings: SolverSettings::default(),
+                gauge: None,
+            };
+            let shared = SharedWarmStart::default();
+            let standard = shared.fit(&dataset, &request(Method::Standard)).unwrap();
+            assert!(
+                shared.0.get().is_none(),
+                "standard's first solve is its answer"
+            );
+            let alone = fit(&dataset, &request(Method::Standard)).unwrap();
+            same_fit(&standard, &alone, "standard");
+            let mut first_stages = None;
+            for method in [Method::Dynamic, Method::Static, Method::Full] {
+                let c = shared.fit(&dataset, &request(method)).unwrap();
+                same_fit(&c, &fit(&dataset, &request(method)).unwrap(), method.name());
+                let warm = shared.0.get().and_then(Option::as_ref).expect("computed");
+                let n = warm.stages.len();
+                assert!(n >= 1);
+                let stages = first_stages.get_or_insert_with(|| c.stages[..n].to_vec());
+                assert_eq!(
+                    &c.stages[..n],
+                    &stages[..],
+                    "{}: the warm start is shared",
+                    method.name()
+                );
+            }
+            // Another dataset does not take this one's warm start.
+            let (other, _) = Generator::new(Preset::T2, Some(images), seed + 10)
+                .with_models(&[model])
+                .generate();
+            same_fit(
+                &shared.fit(&other, &request(Method::Dynamic)).unwrap(),
+                &fit(&other, &request(Method::Dynamic)).unwrap(),
+                "another dataset",
+            );
+        }
+        // A warm start that fails: each user gets fit's error.
+        let (dataset, _) = Generator::new(Preset::T2, Some(2), 1).generate();
+        let shared = SharedWarmStart::default();
+        for method in [Method::Dynamic, Method::Full] {
+            let request = Request {
+                method,
+                settings: SolverSettings::default(),
+                gauge: None,
+            };
+            let e = shared.fit(&dataset, &request).unwrap_err().to_string();
+            assert_eq!(e, fit(&dataset, &request).unwrap_err().to_string());
+            assert!(e.contains("at least 3"), "{e}");
+        }
+    }
+
+    /// Two fits agree bit for bit in everything but their timings.
+    fn same_fit(a: &Calibration, b: &Calibration, what: &str) {
+        let bits = |c: &Calibration| -> Vec<u64> {
+            let s = &c.state;
+            let k = s.intrinsics.iter().flat_map(|k| k.params().to_vec());
+            let p = s.frame_poses.iter().flat_map(|p| p.to_array());
+            k.chain(p)
+                .chain(c.residuals.iter().copied())
+                .map(f64::to_bits)
+                .collect()
+        };
+        assert_eq!(bits(a), bits(b), "{what}: intrinsics, poses and residuals");
+        assert_eq!(a.dataset, b.dataset, "{what}");
+        assert_eq!(a.warnings, b.warnings, "{what}");
+        assert_eq!(a.rejected, b.rejected, "{what}");
+        let iterations =
+            |c: &Calibration| c.stages.iter().map(|s| s.iterations).collect::<Vec<_>>();
+        assert_eq!(iterations(a), iterations(b), "{what}");
+        assert_eq!(a.converged, b.converged, "{what}");
     }
 }

@@ -11,7 +11,7 @@ use crate::model::lens::Intrinsics;
 use crate::model::metrics::{mapping_error, mapping_error_rot};
 use crate::model::selection::{self, AutoSettings, Candidate, HeldOut, Selection};
 use crate::model::state::State;
-use crate::solver::calibrate::{calibrate, fit, Calibration, Request, MIN_IMAGES};
+use crate::solver::calibrate::{Calibration, Request, SharedWarmStart, MIN_IMAGES};
 use crate::solver::problem::{Hold, Loss, Problem, SolverSettings};
 use rayon::prelude::*;
 
@@ -57,21 +57,24 @@ pub fn calibrate_auto(
     tick: &(dyn Fn() + Sync),
 ) -> Result<Calibration> {
     check(dataset, auto)?;
+    // The deformation methods start from the same `standard` solve: computed once.
+    let warm = SharedWarmStart::default();
     let fits: Vec<(Method, Result<Calibration>)> = auto
         .candidates
         .par_iter()
         .map(|&m| {
-            let r = calibrate(
-                dataset,
-                &Request {
-                    method: m,
-                    ..request.clone()
-                },
-            )
-            .map(|mut c| {
-                c.detector_noise_px = auto.detector_noise_px;
-                c
-            });
+            let r = warm
+                .calibrate(
+                    dataset,
+                    &Request {
+                        method: m,
+                        ..request.clone()
+                    },
+                )
+                .map(|mut c| {
+                    c.detector_noise_px = auto.detector_noise_px;
+                    c
+                });
             tick();
             (m, r)
         })
@@ -187,6 +190,8 @@ fn cross_validate(
     let tasks: Vec<(usize, usize)> = (0..auto.candidates.len())
         .flat_map(|c| (0..folds.len()).map(move |f| (c, f)))
         .collect();
+    // One warm start per fold's training data, shared by its candidates.
+    let warm: Vec<SharedWarmStart> = folds.iter().map(|_| SharedWarmStart::default()).collect();
     let results: Vec<Option<(Vec<usize>, HeldOut)>> = tasks
         .par_iter()
         .map(|&(c, f)| {
@@ -197,6 +202,7 @@ fn cross_validate(
                 &settings,
                 request,
                 &folds[f],
+                &warm[f],
             );
             tick();
             r.ok().map(|h| (folds[f].clone(), h))
@@ -220,8 +226,8 @@ fn cross_validate(
         .collect()
 }
 
-/// Trains `method` on all frames but `held` and measures it on `held` (indexed
-/// like `held`).
+/// Trains `method` on all frames but `held` (from the fold's shared warm
+/// start) and measures it on `held` (indexed like `held`).
 fn fold_error(
     cv: &Dataset,
     standard: &Calibration,
@@ -229,9 +235,10 @@ fn fold_error(
     settings: &SolverSettings,
     request: &Request,
     held: &[usize],
+    warm: &SharedWarmStart,
 ) -> Result<HeldOut> {
     let train: Vec<usize> = (0..cv.num_frames()).filter(|j| !held.contains(j)).collect();
-    let trained = fit(
+    let trained = warm.fit(
         &cv.subset(&train),
         &Request {
             method,
