@@ -271,6 +271,62 @@ struct CauchyFold {
     *mt = std::sqrt(drho);
     *mr = drho / *f;
   }
+
+  // f and M = mt I + (mr - mt) e e^T / s for the residual e (s = |e|^2).
+  void Fold(const double e[2], double* f, double M[2][2]) const {
+    const double s = e[0] * e[0] + e[1] * e[1];
+    double mt, mr;
+    Scale(s, f, &mt, &mr);
+    M[0][0] = M[1][1] = mt;
+    M[0][1] = M[1][0] = 0.0;
+    if (mr != mt && s > 0.0) {
+      for (int a = 0; a < 2; ++a)
+        for (int b = 0; b < 2; ++b) M[a][b] += (mr - mt) * e[a] * e[b] / s;
+    }
+  }
+};
+
+// A one-corner block with the Cauchy loss folded in as a view block folds it
+// (CauchyFold), for a static correction's per-corner blocks: with Ceres' own
+// LossFunction (the loss's curvature dropped from Gauss-Newton) its stage took
+// more iterations, each step about half the one before.  The cost and the
+// optimum are the loss's; a loss scale factor of 0 gives the plain residual, as
+// for the view blocks.
+class FoldedCorner final : public ceres::CostFunction {
+ public:
+  FoldedCorner(ceres::CostFunction* corner, CauchyFold loss, std::shared_ptr<const double> loss_scale_factor)
+      : corner_(corner), loss_(loss), loss_scale_factor_(std::move(loss_scale_factor)) {
+    set_num_residuals(2);
+    *mutable_parameter_block_sizes() = corner->parameter_block_sizes();
+  }
+
+  bool Evaluate(double const* const* p, double* r, double** jacobians) const override {
+    if (!corner_->Evaluate(p, r, jacobians)) return false;
+    const double k = *loss_scale_factor_;
+    const CauchyFold loss{loss_.a2 * k * k};
+    double f, M[2][2];
+    loss.Fold(r, &f, M);
+    r[0] *= f;
+    r[1] *= f;
+    if (jacobians == nullptr) return true;
+    const std::vector<int32_t>& sizes = parameter_block_sizes();
+    for (size_t b = 0; b < sizes.size(); ++b) {
+      double* J = jacobians[b];
+      if (J == nullptr) continue;
+      const int n = sizes[b];
+      for (int c = 0; c < n; ++c) {
+        const double j0 = J[c], j1 = J[n + c];
+        J[c] = M[0][0] * j0 + M[0][1] * j1;
+        J[n + c] = M[1][0] * j0 + M[1][1] * j1;
+      }
+    }
+    return true;
+  }
+
+ private:
+  std::unique_ptr<ceres::CostFunction> corner_;
+  CauchyFold loss_;
+  std::shared_ptr<const double> loss_scale_factor_;
 };
 
 // ViewBlock hides the lens and board so that the assembly collects views of
@@ -356,15 +412,8 @@ class ViewReprojection final : public ViewBlock {
       double uv[2], duv[2][kLens + 3];
       if (!Lens::ProjectWithJacobian(intrinsics, cam, uv, &duv[0][0])) return false;
       const double e[2] = {o.w * (o.u - uv[0]), o.w * (o.v - uv[1])};
-      const double s = e[0] * e[0] + e[1] * e[1];
-      double f, mt, mr;
-      loss.Scale(s, &f, &mt, &mr);
-      // M = mt I + (mr - mt) e e^T / s (CauchyFold).
-      double M[2][2] = {{mt, 0}, {0, mt}};
-      if (mr != mt && s > 0.0) {
-        for (int a = 0; a < 2; ++a)
-          for (int b = 0; b < 2; ++b) M[a][b] += (mr - mt) * e[a] * e[b] / s;
-      }
+      double f, M[2][2];
+      loss.Fold(e, &f, M);
       ri[0] = f * e[0];
       ri[1] = f * e[1];
       // dr~/dintrinsics and dr~/dcam: -w M duv.

@@ -426,6 +426,12 @@ void AddResiduals(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params&
                          (!kHasCorner || d.hold_corrections) &&
                          (!kHasFrameExtra || d.hold_deformations);
   const bool per_view = UseViewBlocks<Board>(d, o);
+  // A static correction's per-corner blocks fold the loss in as view blocks do:
+  // over 6 t2 sets its stage took 12-17 % fewer iterations (radial3, kb4; 6 %
+  // for ds) to the same optimum (3.7e-3 px).  Where per-frame bends start flat
+  // (full) the corners they move start far beyond the scale, where the folded
+  // model pulls less than Ceres' correction: 10-33 % more iterations, so no fold.
+  const bool fold_corners = cauchy && Board::kFrameExtra == 0 && !o.reference_jacobian && !PreviousPath(d, o);
   const std::vector<LensOps<Board>> ops = LensOpsPerCamera<Board>(d);
   std::vector<double*> blocks;
   std::vector<bool> corner_used(d.num_corners, false);
@@ -480,9 +486,10 @@ void AddResiduals(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params&
       blocks.push_back(frame_block);
       if (kHasCorner) blocks.push_back(correction);
       ceres::CostFunction* cost = ops[cam].cost(u, v, w, x, rig != nullptr, o.reference_jacobian);
-      a.residuals.push_back(a.problem->AddResidualBlock(cost, loss, blocks));
+      if (fold_corners) cost = new FoldedCorner(cost, fold, a.loss_scale_factor);
+      a.residuals.push_back(a.problem->AddResidualBlock(cost, fold_corners ? nullptr : loss, blocks));
       a.block_observations.push_back({static_cast<uint32_t>(i)});
-      loss_used = true;
+      loss_used |= !fold_corners;
     }
     corner_used[corner] = true;
     frame_used[frame] = true;
