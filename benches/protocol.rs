@@ -49,7 +49,7 @@ fn main() {
     setup.settings.per_corner_blocks = std::env::var("PER_CORNER").is_ok();
     let prepared = start.elapsed().as_secs_f64();
     let prepared_cpu = process_cpu_seconds();
-    let reference = setup.reference.as_ref().expect("reference");
+    let reference = setup.reference().expect("reference");
     let truth = setup.header.truth.as_ref().expect("truth");
     // The test-error refit at the true intrinsics (a subset's lie about as far from
     // the reference's), on the default and on the previous path: CPU ms, least of 5.

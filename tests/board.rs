@@ -524,7 +524,7 @@ fn the_protocol_writes_its_reference_board_as_board_json() {
     // (100 images: enough for its covariance, see `board_json::of`).
     let path = dir.path().join(REFERENCE_BOARD_JSON);
     let read = board_json::read(&path, &setup.dataset.target).unwrap();
-    let reference = setup.reference.as_ref().unwrap();
+    let reference = setup.reference().unwrap();
     assert_eq!(read.correction, reference.state.corrections);
     assert_eq!(read.correction_std.len(), read.correction.len());
     // The 7 values the gauge holds: zero, with σ 0.

@@ -302,7 +302,7 @@ fn nothing_overfits_on_a_rigid_board() {
 #[test]
 fn pose_only_refit_evaluates_like_the_general_problem() {
     let s = setup("t2", 40, 1, &[Method::Standard]);
-    let r = s.reference.as_ref().unwrap();
+    let r = s.reference().unwrap();
     let settings = SolverSettings::default();
     let problem = |hold| Problem {
         hold,
@@ -347,7 +347,7 @@ fn converged(settings: &SolverSettings) -> SolverSettings {
 #[test]
 fn test_error_refit_frame_by_frame_matches_the_joint_ceres_solve() {
     let s = setup("t2", 40, 1, &[Method::Standard]);
-    let r = s.reference.as_ref().unwrap();
+    let r = s.reference().unwrap();
     let truth = s.header.truth.as_ref().unwrap()[0];
     let away = truth
         .with_param("fx", truth.fx() + 3.0)

@@ -357,7 +357,6 @@ pub struct Setup {
     pub header: Header,
     pub dataset: Dataset,
     pub truth: Option<Truth>,
-    pub reference: Option<Calibration>,
     pub subsets: Vec<Vec<usize>>,
     pub settings: SolverSettings,
     /// Warnings about the configuration (a reference set that is the training data).
@@ -365,14 +364,9 @@ pub struct Setup {
     /// `[calibration] detector_noise_px`: σ̂ of the bias ratio and the uncertainty
     /// (estimated per subset when `None`).
     pub detector_noise_px: Option<f64>,
-    /// `[sfm]`: the scene every calibration reconstructs.
-    pub sfm: Option<Experiment>,
-    /// Per camera, the mapping-error grid's rays under the reference and the
-    /// truth: the same for every subset, so unprojected once.
-    grids: Vec<[Option<Rays>; 2]>,
-    /// Per camera, its test-error refit prepared once (empty without a
-    /// reference); a camera it cannot be prepared for has the reason.
-    test_errors: Vec<std::result::Result<TestError, String>>,
+    /// The reference calibration and what the rows are measured against with
+    /// it; empty until installed.
+    measures: Measures,
     /// The reference set, until its calibration is installed.
     reference_data: Option<Dataset>,
     /// `[sfm]`, whose scene may need the reference calibration.
@@ -453,17 +447,14 @@ pub fn plan(config: &Config, protocol: &ProtocolConfig) -> Result<Plan> {
         }
     }
     Ok(Plan(Setup {
-        grids: Vec::new(),
-        test_errors: Vec::new(),
+        measures: Measures::default(),
         header,
         dataset,
         truth,
-        reference: None,
         subsets,
         settings,
         warnings,
         detector_noise_px: config.calibration.detector_noise_px,
-        sfm: None,
         reference_data,
         sfm_config: config.sfm.clone(),
     }))
@@ -509,6 +500,7 @@ pub fn sfm_for_config(config: &Config) -> Result<Experiment> {
     };
     let setup = prepare(&with_sfm, &protocol)?;
     setup
+        .measures
         .sfm
         .ok_or_else(|| Error::Invalid("no [sfm] scene".into()))
 }
@@ -649,6 +641,17 @@ fn refit_problem<'a>(reference: &Calibration, dataset: &'a Dataset) -> Problem<'
 }
 
 impl Setup {
+    /// The reference set's `static` calibration, once installed (none without a
+    /// reference set).
+    pub fn reference(&self) -> Option<&Calibration> {
+        self.measures.reference.as_ref()
+    }
+
+    /// The `[sfm]` scene every calibration reconstructs, once installed.
+    pub fn sfm(&self) -> Option<&Experiment> {
+        self.measures.sfm.as_ref()
+    }
+
     /// The reference set's `static` calibration (none without a reference set),
     /// with the settings of every task.
     fn reference_calibration(&self) -> Result<Option<Calibration>> {
@@ -719,23 +722,15 @@ impl Setup {
     }
 
     /// Takes the reference calibration into the header and the setup.
-    fn install(&mut self, m: Measures) {
-        self.header.reference = m.reference_info;
-        self.reference = m.reference;
-        self.sfm = m.sfm;
-        self.grids = m.grids;
-        self.test_errors = m.test_errors;
+    fn install(&mut self, mut m: Measures) {
+        self.header.reference = m.reference_info.take();
+        self.measures = m;
         self.reference_data = None;
     }
 
     /// What the rows are measured against, once installed.
     fn against(&self) -> Against<'_> {
-        Against {
-            reference: self.reference.as_ref(),
-            sfm: self.sfm.as_ref(),
-            grids: &self.grids,
-            test_errors: &self.test_errors,
-        }
+        self.measures.against()
     }
 
     /// Camera `k`'s results in `c`; a failed test error is recorded in the row's `error`.
@@ -1029,11 +1024,18 @@ impl Plan {
 }
 
 /// The reference calibration and what the rows are measured against with it.
+#[derive(Default)]
 struct Measures {
     reference: Option<Calibration>,
+    /// The header's part of it, taken into the header on install.
     reference_info: Option<ReferenceInfo>,
+    /// `[sfm]`: the scene every calibration reconstructs.
     sfm: Option<Experiment>,
+    /// Per camera, the mapping-error grid's rays under the reference and the
+    /// truth: the same for every subset, so unprojected once.
     grids: Vec<[Option<Rays>; 2]>,
+    /// Per camera, its test-error refit prepared once (empty without a
+    /// reference); a camera it cannot be prepared for has the reason.
     test_errors: Vec<std::result::Result<TestError, String>>,
 }
 
