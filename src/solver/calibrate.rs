@@ -947,7 +947,8 @@ pub struct SharedWarmStart(OnceLock<Option<WarmStart>>);
 
 impl SharedWarmStart {
     /// [`fit`] of `dataset`, from the shared warm start where `request` starts
-    /// from a loose one; `dataset` must be the same every call.
+    /// from a loose one. A dataset or settings other than those the warm start
+    /// was computed from are fitted on their own.
     pub fn fit(&self, dataset: &Dataset, request: &Request) -> Result<Calibration> {
         if !warm_start_is_loose(request, dataset) {
             // Its first solve is the answer: nothing another method can share.
