@@ -17,7 +17,8 @@
 //!
 //! `-- growth N...` instead times one `standard` and one `full` calibration of N
 //! images each (time per image, for the README's cost-growth table); run one
-//! size per process under `/usr/bin/time -v` for its peak memory.
+//! size per process under `/usr/bin/time -v` for its peak memory. Method names
+//! among the arguments (`-- growth 10000 standard`) time only those.
 use deformcal::model::metrics::mapping_error;
 use deformcal::model::synthetic::{Generator, Preset};
 use deformcal::solver::problem::SolverSettings;
@@ -170,11 +171,11 @@ fn compare_paths(model: LensModel) -> bool {
 }
 
 /// One calibration per size and method, time per image.
-fn growth(sizes: &[usize]) {
+fn growth(sizes: &[usize], methods: &[Method]) {
     println!("cost growth: t2 preset, radial3, 1 thread, whole calibration without covariance");
     for &n in sizes {
         let (dataset, _) = Generator::new(Preset::T2, Some(n), 7).generate();
-        for method in [Method::Standard, Method::Full] {
+        for &method in methods {
             let start = Instant::now();
             let cpu = thread_cpu_ms();
             let c =
@@ -200,11 +201,18 @@ fn main() {
         .collect();
     if args.first().map(String::as_str) == Some("growth") {
         let sizes: Vec<usize> = args[1..].iter().filter_map(|s| s.parse().ok()).collect();
-        growth(if sizes.is_empty() {
-            &[25, 100, 400, 1600]
-        } else {
-            &sizes
-        });
+        let mut methods: Vec<Method> = args[1..].iter().filter_map(|s| Method::parse(s)).collect();
+        if methods.is_empty() {
+            methods = vec![Method::Standard, Method::Full];
+        }
+        growth(
+            if sizes.is_empty() {
+                &[25, 100, 400, 1600]
+            } else {
+                &sizes
+            },
+            &methods,
+        );
         return;
     }
     let mut ok = true;

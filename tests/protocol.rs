@@ -178,6 +178,11 @@ fn protocol_records_the_auto_choice_per_subset() {
     let rows = run_on(&s, 2, None);
     let autos: Vec<_> = rows.iter().filter(|r| r.auto).collect();
     assert_eq!(autos.len(), 3);
+    // `auto` shares its subset's warm start with the fixed methods and still
+    // gives what it gives on its own, with a warm start of its own.
+    for (t, row) in rows.iter().enumerate().filter(|(_, r)| r.auto) {
+        assert_eq!(*row, s.task(t), "task {t}");
+    }
     for a in &autos {
         assert!(a.ok(), "{:?}", a.error);
         let sel = a.selection.as_ref().expect("auto's evidence");

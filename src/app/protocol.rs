@@ -17,7 +17,7 @@ use crate::model::target::Target;
 use crate::model::uncertainty::CameraUncertainty;
 use crate::solver::calibrate::{calibrate, Calibration, Request, SharedWarmStart};
 use crate::solver::problem::{rmse, Hold, PreparedRefit, Problem, SolverSettings};
-use crate::solver::select::calibrate_auto;
+use crate::solver::select::calibrate_auto_sharing;
 use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
@@ -840,7 +840,7 @@ impl Setup {
                     seed: a.seed,
                     detector_noise_px: self.detector_noise_px,
                 };
-                calibrate_auto(&data, &request, &settings, &|| {})
+                calibrate_auto_sharing(&data, &request, &settings, warm, &|| {})
             }
             _ => warm.calibrate(&data, &request),
         };

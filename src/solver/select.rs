@@ -56,9 +56,21 @@ pub fn calibrate_auto(
     auto: &AutoSettings,
     tick: &(dyn Fn() + Sync),
 ) -> Result<Calibration> {
-    check(dataset, auto)?;
     // The deformation methods start from the same `standard` solve: computed once.
-    let warm = SharedWarmStart::default();
+    calibrate_auto_sharing(dataset, request, auto, &SharedWarmStart::default(), tick)
+}
+
+/// [`calibrate_auto`] whose candidates on all the data take their warm start
+/// from `warm`, which other calibrations of the same data may share (the
+/// protocol's methods on one subset).
+pub fn calibrate_auto_sharing(
+    dataset: &Dataset,
+    request: &Request,
+    auto: &AutoSettings,
+    warm: &SharedWarmStart,
+    tick: &(dyn Fn() + Sync),
+) -> Result<Calibration> {
+    check(dataset, auto)?;
     let fits: Vec<(Method, Result<Calibration>)> = auto
         .candidates
         .par_iter()
