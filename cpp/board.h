@@ -30,7 +30,9 @@ inline T Paraboloid(const double* x, const T* abc) {
 
 // A model's per-image parameters (kFrameExtra of them) ride in the same block as
 // the image's pose, so the Schur solver eliminates them together with it; its
-// per-corner correction (kCornerSize values, 0 for none) is a block of its own.
+// per-corner correction (kCornerSize values, 0 for none) is a block of its own
+// (or a slot in a block of a few corners, solver.cc).  GaugeHeld(k) lists the
+// components of the k-th gauge corner's correction held at their value.
 
 // Rigid, perfectly planar board.
 struct StandardBoard {
@@ -45,7 +47,7 @@ struct StandardBoard {
     out[1] = T(x[1]);
     out[2] = T(x[2]);
   }
-  static void FixGauge(ceres::Problem&, double*, const std::vector<uint32_t>&) {}
+  static std::vector<int> GaugeHeld(size_t /*k*/) { return {}; }
 };
 
 // One 3D correction per corner for the whole dataset (Strobl & Hirzinger).
@@ -62,12 +64,9 @@ struct StaticBoard {
     out[2] = x[2] + corner[2];
   }
   // 7 DOF: two corners fully, the z of a third; together they pin the pose and scale.
-  static void FixGauge(ceres::Problem& problem, double* corrections,
-                       const std::vector<uint32_t>& gauge) {
-    problem.SetParameterBlockConstant(corrections + kCorrectionStride * gauge[0]);
-    problem.SetParameterBlockConstant(corrections + kCorrectionStride * gauge[1]);
-    problem.SetManifold(corrections + kCorrectionStride * gauge[2],
-                        new ceres::SubsetManifold(3, {2}));
+  static std::vector<int> GaugeHeld(size_t k) {
+    if (k < 2) return {0, 1, 2};
+    return {2};
   }
 };
 
@@ -84,7 +83,7 @@ struct DynamicBoard {
     out[1] = T(x[1]);
     out[2] = x[2] + Paraboloid(x, frame_extra);
   }
-  static void FixGauge(ceres::Problem&, double*, const std::vector<uint32_t>&) {}
+  static std::vector<int> GaugeHeld(size_t /*k*/) { return {}; }
 };
 
 // Static in-plane correction per corner plus the per-image paraboloid.
@@ -101,11 +100,7 @@ struct FullBoard {
     out[2] = x[2] + Paraboloid(x, frame_extra);
   }
   // 4 DOF: in-plane translation, rotation and scale, pinned by two corners.
-  static void FixGauge(ceres::Problem& problem, double* corrections,
-                       const std::vector<uint32_t>& gauge) {
-    problem.SetParameterBlockConstant(corrections + kCorrectionStride * gauge[0]);
-    problem.SetParameterBlockConstant(corrections + kCorrectionStride * gauge[1]);
-  }
+  static std::vector<int> GaugeHeld(size_t /*k*/) { return {0, 1}; }
 };
 
 // Richer bends (beyond the paper): Δz = Σ c_k x^m y^n over every monomial with
@@ -147,9 +142,9 @@ struct PolynomialBoard {
     out[1] = kInPlane ? x[1] + corner[1] : T(x[1]);
     out[2] = x[2] + PolynomialBend<Order>(x, frame_extra);
   }
-  static void FixGauge(ceres::Problem& problem, double* corrections,
-                       const std::vector<uint32_t>& gauge) {
-    if (kInPlane) FullBoard::FixGauge(problem, corrections, gauge);
+  static std::vector<int> GaugeHeld(size_t k) {
+    if (kInPlane) return FullBoard::GaugeHeld(k);
+    return {};
   }
 };
 
