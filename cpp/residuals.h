@@ -347,9 +347,10 @@ class FoldedCorner final : public ceres::CostFunction {
 
 // A cost whose parameter block `block` (a corner's correction) is read from a
 // slot, `offset` values in, of a larger block holding the corrections of a few
-// corners (the correction prior's; ChainedReprojection places its own corner).  Ceres' Schur update then works on a few large cells per image instead
-// of one 2 x 2 cell per pair of corners (solver.cc, UseCornerGroups); the
-// Jacobian over the larger block is zero outside the slot.
+// corners (the correction prior's; ChainedReprojection places its own corner).
+// Ceres' Schur update then works on a few large cells per image instead of one
+// 2 x 2 cell per pair of corners (solver.cc, UseCornerGroups); the Jacobian over
+// the larger block is zero outside the slot.
 class InCornerGroup final : public ceres::CostFunction {
  public:
   InCornerGroup(ceres::CostFunction* inner, int block, int offset, int group_size)
