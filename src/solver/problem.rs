@@ -192,10 +192,21 @@ impl<'a> Problem<'a> {
 
 /// Images observing each corner (any camera counted once per frame).
 pub fn frames_per_corner(dataset: &Dataset) -> Vec<usize> {
-    let mut seen = std::collections::HashSet::new();
-    let mut n = vec![0; dataset.target.num_corners()];
+    // A flag per (frame, corner) rather than a hash set: at 10 000 images this
+    // runs on 1.7 M observations in every outlier-rejection round.
+    let corners = dataset.target.num_corners();
+    let frames = dataset
+        .observations
+        .iter()
+        .map(|o| o.frame + 1)
+        .max()
+        .unwrap_or(0);
+    let mut seen = vec![false; frames * corners];
+    let mut n = vec![0; corners];
     for o in &dataset.observations {
-        if seen.insert((o.frame, o.corner)) {
+        let flag = &mut seen[o.frame * corners + o.corner];
+        if !*flag {
+            *flag = true;
             n[o.corner] += 1;
         }
     }

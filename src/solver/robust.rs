@@ -10,7 +10,7 @@ use crate::model::dataset::{Dataset, Observation};
 use crate::model::zhang;
 use crate::solver::problem::{rmse, Problem, SolveReport, SolverSettings, State};
 use nalgebra::Vector2;
-use std::collections::{BTreeMap, HashMap};
+use std::collections::BTreeMap;
 
 /// How far outside the image (as a fraction of its width or height) a corner may
 /// lie before it is dropped: detectors report corners up to the border, and a few
@@ -407,9 +407,17 @@ fn pick_outliers(dataset: &Dataset, residuals: &[f64], k: f64) -> Vec<usize> {
     if sigma <= 0.0 {
         return Vec::new();
     }
-    let mut per_view: HashMap<(usize, usize), usize> = HashMap::new();
+    // Corners per view, indexed camera-major (a flat array: this runs on every
+    // observation in every round).
+    let frames = dataset
+        .observations
+        .iter()
+        .map(|o| o.frame + 1)
+        .max()
+        .unwrap_or(0);
+    let mut per_view = vec![0usize; dataset.cameras.len() * frames];
     for o in &dataset.observations {
-        *per_view.entry((o.camera, o.frame)).or_default() += 1;
+        per_view[o.camera * frames + o.frame] += 1;
     }
     let mut worst: Vec<(usize, f64)> = deviations
         .iter()
@@ -428,7 +436,7 @@ fn pick_outliers(dataset: &Dataset, residuals: &[f64], k: f64) -> Vec<usize> {
         {
             continue;
         }
-        let n = per_view.get_mut(&(o.camera, o.frame)).expect("counted");
+        let n = &mut per_view[o.camera * frames + o.frame];
         if *n > MIN_VIEW_CORNERS {
             *n -= 1;
             taken.insert((o.camera, o.frame, o.corner));
@@ -560,6 +568,7 @@ mod tests {
     use crate::model::target::Target;
     use rand::seq::SliceRandom;
     use rand::{Rng, SeedableRng};
+    use std::collections::HashMap;
 
     /// The deviations computed again with a map and the predictions written out
     /// one by one, as the reference of the dense computation.
