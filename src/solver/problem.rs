@@ -195,13 +195,7 @@ pub fn frames_per_corner(dataset: &Dataset) -> Vec<usize> {
     // A flag per (frame, corner) rather than a hash set: at 10 000 images this
     // runs on 1.7 M observations in every outlier-rejection round.
     let corners = dataset.target.num_corners();
-    let frames = dataset
-        .observations
-        .iter()
-        .map(|o| o.frame + 1)
-        .max()
-        .unwrap_or(0);
-    let mut seen = vec![false; frames * corners];
+    let mut seen = vec![false; dataset.num_frames() * corners];
     let mut n = vec![0; corners];
     for o in &dataset.observations {
         let flag = &mut seen[o.frame * corners + o.corner];

@@ -409,12 +409,7 @@ fn pick_outliers(dataset: &Dataset, residuals: &[f64], k: f64) -> Vec<usize> {
     }
     // Corners per view, indexed camera-major (a flat array: this runs on every
     // observation in every round).
-    let frames = dataset
-        .observations
-        .iter()
-        .map(|o| o.frame + 1)
-        .max()
-        .unwrap_or(0);
+    let frames = dataset.num_frames();
     let mut per_view = vec![0usize; dataset.cameras.len() * frames];
     for o in &dataset.observations {
         per_view[o.camera * frames + o.frame] += 1;
