@@ -8,9 +8,11 @@
 #include <glog/logging.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
-#include <cstdio>
 #include <cmath>
+#include <cstdio>
+#include <iterator>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -228,10 +230,17 @@ void SilenceGlogOnce() {
 
 // The assembled problem with the bookkeeping the solver and evaluator need.
 struct Assembled {
+  // Every cost function of the problem, owned here rather than by the problem:
+  // Ceres would keep a hash map of reference counts over the ~1.7 M
+  // observation blocks of a 10 000-image problem to delete them.  Declared
+  // before the problem, so that it outlives it.
+  std::vector<std::unique_ptr<ceres::CostFunction>> costs;
   std::unique_ptr<ceres::Problem> problem;
   std::vector<ceres::ResidualBlockId> residuals;
-  // The observations behind each residual block, in its residual order.
-  std::vector<std::vector<uint32_t>> block_observations;
+  // The observations behind residual block k, in its residual order:
+  // block_observations[block_observation_begin[k] .. block_observation_begin[k + 1]].
+  std::vector<uint32_t> block_observations;
+  std::vector<size_t> block_observation_begin{0};
   std::vector<double*> frame_pose_blocks;
   std::vector<double*> correction_blocks;  // free corrections, none partly held
   bool corner_groups = false;              // corrections in groups (UseCornerGroups)
@@ -247,6 +256,28 @@ struct Assembled {
   // shared with every loss and view block, so that one problem serves the
   // warm-up, the robust solve and the plain residuals read after it.
   std::shared_ptr<double> loss_scale_factor = std::make_shared<double>(1.0);
+
+  // Adds a residual block of `cost` (owned here from now on) over `blocks`.
+  template <class... Blocks>
+  ceres::ResidualBlockId Add(ceres::CostFunction* cost, ceres::LossFunction* loss, Blocks&&... blocks) {
+    costs.emplace_back(cost);
+    return problem->AddResidualBlock(cost, loss, std::forward<Blocks>(blocks)...);
+  }
+
+  // Adds an observation block: its residual block and the observations behind it.
+  template <class Observations, class... Blocks>
+  void AddObservations(const Observations& observations, ceres::CostFunction* cost,
+                       ceres::LossFunction* loss, Blocks&&... blocks) {
+    residuals.push_back(Add(cost, loss, std::forward<Blocks>(blocks)...));
+    block_observations.insert(block_observations.end(), std::begin(observations), std::end(observations));
+    block_observation_begin.push_back(block_observations.size());
+  }
+
+  // The observations behind residual block k.
+  std::pair<const uint32_t*, const uint32_t*> ObservationsOf(size_t k) const {
+    const uint32_t* base = block_observations.data();
+    return {base + block_observation_begin[k], base + block_observation_begin[k + 1]};
+  }
 };
 
 // Ceres' Cauchy loss behind a shared scale factor (0: plain squares).  Ceres
@@ -457,8 +488,7 @@ struct ViewCollector {
   void AddTo(Assembled& a) {
     for (size_t k = 0; k < costs.size(); ++k) {
       costs[k]->Finish();
-      a.residuals.push_back(a.problem->AddResidualBlock(costs[k].release(), nullptr, blocks[k]));
-      a.block_observations.push_back(std::move(observations[k]));
+      a.AddObservations(observations[k], costs[k].release(), nullptr, blocks[k]);
     }
   }
 };
@@ -565,8 +595,7 @@ void AddResiduals(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params&
       } else {
         std::unique_ptr<PoseOnlyView> f(ops[cam].view(intrinsics, rig));
         f->Add(u, v, w, point);
-        a.residuals.push_back(a.problem->AddResidualBlock(f->Release(), loss, frame_block));
-        a.block_observations.push_back({static_cast<uint32_t>(i)});
+        a.AddObservations(std::array<uint32_t, 1>{static_cast<uint32_t>(i)}, f->Release(), loss, frame_block);
         loss_used = true;
       }
     } else if (per_view) {
@@ -592,8 +621,7 @@ void AddResiduals(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params&
                         grouped ? Params::GroupOffset(corner) : 0,
                         grouped ? p.GroupSize(corner) : Board::kCornerSize);
       if (fold_corners) cost = new FoldedCorner(cost, fold, a.loss_scale_factor);
-      a.residuals.push_back(a.problem->AddResidualBlock(cost, fold_corners ? nullptr : loss, blocks));
-      a.block_observations.push_back({static_cast<uint32_t>(i)});
+      a.AddObservations(std::array<uint32_t, 1>{static_cast<uint32_t>(i)}, cost, fold_corners ? nullptr : loss, blocks);
       loss_used |= !fold_corners;
     }
     corner_used[corner] = true;
@@ -602,9 +630,7 @@ void AddResiduals(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params&
   full_views.AddTo(a);
   if (!loss_used) delete loss;  // Ceres owns it once a block uses it
   for (auto& [key, view] : views) {
-    a.residuals.push_back(
-        a.problem->AddResidualBlock(view.first->Release(), nullptr, p.Frame(key.second)));
-    a.block_observations.push_back(std::move(view.second));
+    a.AddObservations(view.second, view.first->Release(), nullptr, p.Frame(key.second));
   }
   for (uint32_t f = 0; f < d.num_frames; ++f) {
     if (frame_used[f]) a.frame_pose_blocks.push_back(p.Frame(f));
@@ -627,7 +653,7 @@ void AddLensPriors(const ffi::ProblemData& d, Params& p, Assembled& a) {
     for (double w : weight) any = any || w > 0.0;
     if (any) {
       a.prior_residuals.push_back(
-          problem.AddResidualBlock(new LensPrior(std::move(weight)), nullptr, block));
+          a.Add(new LensPrior(std::move(weight)), nullptr, block));
     }
   }
 }
@@ -638,7 +664,6 @@ void AddLensPriors(const ffi::ProblemData& d, Params& p, Assembled& a) {
 // tight prior that similarity is pinned by them and the correction held at zero.
 template <int N>
 void AddCorrectionPrior(const ffi::ProblemData& d, Params& p, Assembled& a) {
-  ceres::Problem& problem = *a.problem;
   if (d.correction_prior_weight.empty()) return;
   const auto free = [&](uint32_t c) { return static_cast<bool>(a.correction_free[c]); };
   bool any_free = false;
@@ -657,7 +682,7 @@ void AddCorrectionPrior(const ffi::ProblemData& d, Params& p, Assembled& a) {
     ceres::CostFunction* prior =
         new CorrectionPrior<N>(mean, &d.correction_prior_weight[kCorrectionStride * c], &d.board[3 * c]);
     if (a.corner_groups) prior = new InCornerGroup(prior, 0, Params::GroupOffset(c), p.GroupSize(c));
-    a.prior_residuals.push_back(problem.AddResidualBlock(
+    a.prior_residuals.push_back(a.Add(
         prior, nullptr, a.corner_groups ? p.Group(c) : p.Correction(c), a.similarity.get()));
   }
 }
@@ -667,7 +692,6 @@ void AddCorrectionPrior(const ffi::ProblemData& d, Params& p, Assembled& a) {
 // which blocks exist and which are held.
 template <class Board>
 void AddPriors(const ffi::ProblemData& d, Params& p, Assembled& a) {
-  ceres::Problem& problem = *a.problem;
   constexpr int N = Board::kCornerSize, E = Board::kFrameExtra;
   AddLensPriors(d, p, a);
   if constexpr (N > 0) AddCorrectionPrior<N>(d, p, a);
@@ -676,7 +700,7 @@ void AddPriors(const ffi::ProblemData& d, Params& p, Assembled& a) {
     if (!d.bend_prior_weight.empty()) {
       for (double* block : a.frame_pose_blocks) {
         a.prior_residuals.push_back(
-            problem.AddResidualBlock(new BendPrior<E>(d.bend_prior_weight.data()), nullptr, block));
+            a.Add(new BendPrior<E>(d.bend_prior_weight.data()), nullptr, block));
       }
     }
     if (!d.bend_smoothness_weight.empty()) {
@@ -685,7 +709,7 @@ void AddPriors(const ffi::ProblemData& d, Params& p, Assembled& a) {
         ceres::LossFunction* loss = d.bend_smoothness_loss > 0.0
                                         ? new ceres::CauchyLoss(d.bend_smoothness_loss)
                                         : nullptr;
-        a.prior_residuals.push_back(problem.AddResidualBlock(
+        a.prior_residuals.push_back(a.Add(
             new BendSmoothness<E>(d.bend_smoothness_weight.data()), loss,
             a.frame_pose_blocks[k - 1], a.frame_pose_blocks[k]));
         a.frames_linked = true;
@@ -697,7 +721,12 @@ void AddPriors(const ffi::ProblemData& d, Params& p, Assembled& a) {
 Assembled Assemble(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params& p) {
   SilenceGlogOnce();
   Assembled a;
-  a.problem = std::make_unique<ceres::Problem>();
+  ceres::Problem::Options options;
+  options.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;  // Assembled::costs
+  // ValidateProblem checked every offset, so no two blocks overlap; the checks
+  // would sort a copy of every block's parameter list.
+  options.disable_all_safety_checks = true;
+  a.problem = std::make_unique<ceres::Problem>(options);
   DispatchBoard(std::string(d.board_model),
                 [&](auto board) {
                   AddResiduals<decltype(board)>(d, o, p, a);
@@ -780,6 +809,35 @@ class StderrProgress : public ceres::IterationCallback {
 // Relative tolerances of the warm-up: it only needs to come close.
 constexpr double kWarmUpTolerance = 1e-3;
 
+// The observation blocks' residuals (no loss, the loss folded into view blocks
+// switched off too), block after block, and their cost; false where one is not
+// finite.  Straight from the cost functions: Problem::Evaluate would build a
+// program and an evaluator over every block first (5 % of a 10 000-image `full`
+// calibration, called after every solve).
+bool PlainResiduals(const Assembled& a, std::vector<double>* by_block, double* cost) {
+  const double robust = *a.loss_scale_factor;
+  *a.loss_scale_factor = 0.0;
+  by_block->assign(2 * a.block_observations.size(), 0.0);
+  std::vector<double*> blocks;
+  double sum = 0.0;
+  bool ok = true;
+  size_t row = 0;
+  for (size_t k = 0; k < a.residuals.size() && ok; ++k) {
+    const ceres::CostFunction* f = a.problem->GetCostFunctionForResidualBlock(a.residuals[k]);
+    a.problem->GetParameterBlocksForResidualBlock(a.residuals[k], &blocks);
+    double* r = by_block->data() + row;
+    ok = f->Evaluate(blocks.data(), r, nullptr);
+    for (int i = 0; i < f->num_residuals() && ok; ++i) {
+      ok = std::isfinite(r[i]);
+      sum += r[i] * r[i];
+    }
+    row += static_cast<size_t>(f->num_residuals());
+  }
+  *a.loss_scale_factor = robust;
+  if (cost != nullptr) *cost = 0.5 * sum;
+  return ok && row == by_block->size();
+}
+
 // Whether more than `warm_up_share` of the corners sit beyond the loss's scale:
 // then the start is far from the optimum and a warm-up (loss-free, or with a
 // wider loss) pays.  With most
@@ -790,15 +848,8 @@ constexpr double kWarmUpTolerance = 1e-3;
 // just those, and its robust solve crawled (kb4: 21 iterations against 3 after a
 // warm-up), so Rust asks for a warm-up there at a smaller share.
 bool FarFromOptimum(Assembled& a, const ffi::SolveOptions& o) {
-  ceres::Problem::EvaluateOptions e;
-  e.residual_blocks = a.residuals;  // the observations, not the priors
-  e.apply_loss_function = false;
-  e.num_threads = o.num_threads;
   std::vector<double> r;
-  *a.loss_scale_factor = 0.0;
-  const bool ok = a.problem->Evaluate(e, nullptr, &r, nullptr, nullptr);
-  *a.loss_scale_factor = 1.0;
-  if (!ok || r.empty()) return false;
+  if (!PlainResiduals(a, &r, nullptr) || r.empty()) return false;
   std::vector<double> s(r.size() / 2);
   for (size_t i = 0; i < s.size(); ++i) s[i] = r[2 * i] * r[2 * i] + r[2 * i + 1] * r[2 * i + 1];
   // The corner at this rank (from the bottom) is beyond the loss's scale exactly
@@ -899,15 +950,21 @@ std::vector<double*> FreeLayoutBlocks(const Assembled& a) {
 bool OrderedResiduals(Assembled& a, size_t num_observations, int threads, double* cost,
                       std::vector<double>* out, ceres::CRSMatrix* jacobian,
                       const double* base = nullptr, std::vector<uint32_t>* columns = nullptr) {
+  std::vector<double> by_block;
+  if (jacobian == nullptr) {
+    if (!PlainResiduals(a, &by_block, cost)) return false;
+    out->assign(2 * num_observations, 0.0);
+    for (size_t r = 0; r < by_block.size(); ++r) {
+      (*out)[2 * a.block_observations[r / 2] + r % 2] = by_block[r];
+    }
+    return true;
+  }
   ceres::Problem::EvaluateOptions e;
   e.residual_blocks = a.residuals;
   e.apply_loss_function = false;
   e.num_threads = threads;
-  if (jacobian != nullptr) {
-    e.parameter_blocks = FreeLayoutBlocks(a);
-    if (columns != nullptr) *columns = ColumnParameters(*a.problem, e.parameter_blocks, base);
-  }
-  std::vector<double> by_block;
+  e.parameter_blocks = FreeLayoutBlocks(a);
+  if (columns != nullptr) *columns = ColumnParameters(*a.problem, e.parameter_blocks, base);
   // Plain residuals: the loss folded into view blocks is switched off too.
   const double robust = *a.loss_scale_factor;
   *a.loss_scale_factor = 0.0;
@@ -918,14 +975,12 @@ bool OrderedResiduals(Assembled& a, size_t num_observations, int threads, double
   // Ceres' row r is observation row order[r].
   std::vector<uint32_t> order;
   order.reserve(2 * num_observations);
-  for (const auto& obs : a.block_observations) {
-    for (uint32_t i : obs) {
-      order.push_back(2 * i);
-      order.push_back(2 * i + 1);
-    }
+  for (uint32_t i : a.block_observations) {
+    order.push_back(2 * i);
+    order.push_back(2 * i + 1);
   }
   for (size_t r = 0; r < order.size(); ++r) (*out)[order[r]] = by_block[r];
-  if (jacobian != nullptr) SortRows(order, *jacobian);
+  SortRows(order, *jacobian);
   return true;
 }
 
@@ -988,8 +1043,10 @@ void DirectJacobian(const Assembled& a, const double* base, size_t num_observati
     if (!cost->Evaluate(blocks.data(), r.data(), jac_ptr.data())) {
       Fail("the residuals could not be evaluated (a point behind the camera?)");
     }
-    const std::vector<uint32_t>& obs = a.block_observations[k];
-    if (static_cast<size_t>(nres) != 2 * obs.size()) Fail("a residual block does not have 2 rows per observation");
+    const auto [obs, obs_end] = a.ObservationsOf(k);
+    if (static_cast<size_t>(nres) != 2 * static_cast<size_t>(obs_end - obs)) {
+      Fail("a residual block does not have 2 rows per observation");
+    }
     for (int row = 0; row < nres; ++row) {
       const size_t target = 2 * obs[row / 2] + row % 2;
       out.residuals[target] = r[row];
