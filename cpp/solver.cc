@@ -825,6 +825,11 @@ bool PlainResiduals(const Assembled& a, std::vector<double>* by_block, double* c
   for (size_t k = 0; k < a.residuals.size() && ok; ++k) {
     const ceres::CostFunction* f = a.problem->GetCostFunctionForResidualBlock(a.residuals[k]);
     a.problem->GetParameterBlocksForResidualBlock(a.residuals[k], &blocks);
+    // Two rows per observation behind the block, checked before they are written.
+    const auto [obs, obs_end] = a.ObservationsOf(k);
+    if (static_cast<size_t>(f->num_residuals()) != 2 * static_cast<size_t>(obs_end - obs)) {
+      Fail("a residual block does not have 2 rows per observation");
+    }
     double* r = by_block->data() + row;
     ok = f->Evaluate(blocks.data(), r, nullptr);
     for (int i = 0; i < f->num_residuals() && ok; ++i) {
@@ -835,7 +840,7 @@ bool PlainResiduals(const Assembled& a, std::vector<double>* by_block, double* c
   }
   *a.loss_scale_factor = robust;
   if (cost != nullptr) *cost = 0.5 * sum;
-  return ok && row == by_block->size();
+  return ok;
 }
 
 // Whether more than `warm_up_share` of the corners sit beyond the loss's scale:
