@@ -273,10 +273,14 @@ struct Assembled {
     block_observation_begin.push_back(block_observations.size());
   }
 
-  // The observations behind residual block k.
-  std::pair<const uint32_t*, const uint32_t*> ObservationsOf(size_t k) const {
-    const uint32_t* base = block_observations.data();
-    return {base + block_observation_begin[k], base + block_observation_begin[k + 1]};
+  // The observations behind residual block k, whose cost function has
+  // `num_residuals` rows: two per observation, checked before anyone writes them.
+  const uint32_t* ObservationsOf(size_t k, int num_residuals) const {
+    const size_t begin = block_observation_begin[k], end = block_observation_begin[k + 1];
+    if (static_cast<size_t>(num_residuals) != 2 * (end - begin)) {
+      Fail("a residual block does not have 2 rows per observation");
+    }
+    return block_observations.data() + begin;
   }
 };
 
@@ -825,11 +829,7 @@ bool PlainResiduals(const Assembled& a, std::vector<double>* by_block, double* c
   for (size_t k = 0; k < a.residuals.size() && ok; ++k) {
     const ceres::CostFunction* f = a.problem->GetCostFunctionForResidualBlock(a.residuals[k]);
     a.problem->GetParameterBlocksForResidualBlock(a.residuals[k], &blocks);
-    // Two rows per observation behind the block, checked before they are written.
-    const auto [obs, obs_end] = a.ObservationsOf(k);
-    if (static_cast<size_t>(f->num_residuals()) != 2 * static_cast<size_t>(obs_end - obs)) {
-      Fail("a residual block does not have 2 rows per observation");
-    }
+    a.ObservationsOf(k, f->num_residuals());  // the rows fit
     double* r = by_block->data() + row;
     ok = f->Evaluate(blocks.data(), r, nullptr);
     for (int i = 0; i < f->num_residuals() && ok; ++i) {
@@ -949,21 +949,10 @@ std::vector<double*> FreeLayoutBlocks(const Assembled& a) {
   return out;
 }
 
-// Residuals (loss not applied) in observation order; Ceres orders them by block.
-// With `jacobian`, also the Jacobian over the free parameter blocks, whose columns'
-// buffer indices go to `columns`.
-bool OrderedResiduals(Assembled& a, size_t num_observations, int threads, double* cost,
-                      std::vector<double>* out, ceres::CRSMatrix* jacobian,
-                      const double* base = nullptr, std::vector<uint32_t>* columns = nullptr) {
-  std::vector<double> by_block;
-  if (jacobian == nullptr) {
-    if (!PlainResiduals(a, &by_block, cost)) return false;
-    out->assign(2 * num_observations, 0.0);
-    for (size_t r = 0; r < by_block.size(); ++r) {
-      (*out)[2 * a.block_observations[r / 2] + r % 2] = by_block[r];
-    }
-    return true;
-  }
+// Problem::Evaluate of the observation blocks with their Jacobian over the free
+// parameter blocks, rows sorted into observation order; residuals block after block.
+bool EvaluateWithJacobian(Assembled& a, int threads, double* cost, std::vector<double>* by_block,
+                          ceres::CRSMatrix* jacobian, const double* base, std::vector<uint32_t>* columns) {
   ceres::Problem::EvaluateOptions e;
   e.residual_blocks = a.residuals;
   e.apply_loss_function = false;
@@ -973,19 +962,38 @@ bool OrderedResiduals(Assembled& a, size_t num_observations, int threads, double
   // Plain residuals: the loss folded into view blocks is switched off too.
   const double robust = *a.loss_scale_factor;
   *a.loss_scale_factor = 0.0;
-  const bool ok = a.problem->Evaluate(e, cost, &by_block, nullptr, jacobian);
+  const bool ok = a.problem->Evaluate(e, cost, by_block, nullptr, jacobian);
   *a.loss_scale_factor = robust;
   if (!ok) return false;
-  out->assign(2 * num_observations, 0.0);
   // Ceres' row r is observation row order[r].
   std::vector<uint32_t> order;
-  order.reserve(2 * num_observations);
+  order.reserve(2 * a.block_observations.size());
   for (uint32_t i : a.block_observations) {
     order.push_back(2 * i);
     order.push_back(2 * i + 1);
   }
-  for (size_t r = 0; r < order.size(); ++r) (*out)[order[r]] = by_block[r];
   SortRows(order, *jacobian);
+  return true;
+}
+
+// Residuals (loss not applied) in observation order; Ceres orders them by block.
+// With `jacobian`, also the Jacobian over the free parameter blocks, whose columns'
+// buffer indices go to `columns`.
+bool OrderedResiduals(Assembled& a, size_t num_observations, int threads, double* cost,
+                      std::vector<double>* out, ceres::CRSMatrix* jacobian,
+                      const double* base = nullptr, std::vector<uint32_t>* columns = nullptr) {
+  std::vector<double> by_block;
+  if (jacobian == nullptr) {
+    if (!PlainResiduals(a, &by_block, cost)) return false;
+  } else if (!EvaluateWithJacobian(a, threads, cost, &by_block, jacobian, base, columns)) {
+    return false;
+  }
+  if (by_block.size() != 2 * a.block_observations.size()) return false;
+  // Row r, block after block, is observation block_observations[r / 2]'s.
+  out->assign(2 * num_observations, 0.0);
+  for (size_t r = 0; r < by_block.size(); ++r) {
+    (*out)[2 * a.block_observations[r / 2] + r % 2] = by_block[r];
+  }
   return true;
 }
 
@@ -1048,10 +1056,7 @@ void DirectJacobian(const Assembled& a, const double* base, size_t num_observati
     if (!cost->Evaluate(blocks.data(), r.data(), jac_ptr.data())) {
       Fail("the residuals could not be evaluated (a point behind the camera?)");
     }
-    const auto [obs, obs_end] = a.ObservationsOf(k);
-    if (static_cast<size_t>(nres) != 2 * static_cast<size_t>(obs_end - obs)) {
-      Fail("a residual block does not have 2 rows per observation");
-    }
+    const uint32_t* obs = a.ObservationsOf(k, nres);
     for (int row = 0; row < nres; ++row) {
       const size_t target = 2 * obs[row / 2] + row % 2;
       out.residuals[target] = r[row];
