@@ -3,6 +3,7 @@
 // board.h).  Knows nothing of how a problem is assembled.
 #pragma once
 
+#include <Eigen/Core>
 #include <ceres/ceres.h>
 
 #include <algorithm>
@@ -393,6 +394,120 @@ class InCornerGroup final : public ceres::CostFunction {
   static constexpr int kMaxSlotJacobian = 32;
   std::unique_ptr<ceres::CostFunction> inner_;
   int block_, offset_, slot_size_ = 0;
+};
+
+// A view block handed to the solver as k = c + 1 rows instead of its 2N: with
+// the c = sum of its blocks' sizes columns of J (rows of the inner block) and
+// the residual r, R is the upper triangular factor of the Gram matrix of
+// [J r] (R^T R = [J r]^T [J r]).  Its first c columns are the Jacobian and its
+// last the residual, so the cost |r|^2 / 2, the gradient J^T r and the
+// Gauss-Newton matrix J^T J (hence every Levenberg-Marquardt step, the jacobi
+// scaling and the model cost change) are the inner block's, to rounding: the
+// solve takes the same steps, while Ceres' Schur elimination and its Jacobian
+// bookkeeping work on 13 rows per view (ds, standard) instead of 338.
+// Residual-only evaluations (Ceres reads only their cost) give (|r|, 0, ...).
+// The plain per-corner residuals stay with the inner block (inner()).
+class CompressedRows final : public ceres::CostFunction {
+ public:
+  explicit CompressedRows(ceres::CostFunction* inner) : inner_(inner) {
+    *mutable_parameter_block_sizes() = inner->parameter_block_sizes();
+    for (int32_t size : parameter_block_sizes()) columns_ += size;
+    set_num_residuals(columns_ + 1);
+  }
+
+  // Whether compressing `inner` saves rows.
+  static bool Pays(const ceres::CostFunction& inner) {
+    int columns = 0;
+    for (int32_t size : inner.parameter_block_sizes()) columns += size;
+    return inner.num_residuals() > columns + 1;
+  }
+
+  const ceres::CostFunction& inner() const { return *inner_; }
+
+  bool Evaluate(double const* const* p, double* r, double** jacobians) const override {
+    const int m = inner_->num_residuals(), k = num_residuals();
+    const std::vector<int32_t>& sizes = parameter_block_sizes();
+    // Scratch per thread: Ceres evaluates blocks in parallel.
+    thread_local std::vector<double> inner_r, inner_j;
+    thread_local std::vector<double*> inner_ptr;
+    inner_r.resize(static_cast<size_t>(m));
+    if (jacobians == nullptr) {
+      if (!inner_->Evaluate(p, inner_r.data(), nullptr)) return false;
+      double s = 0.0;
+      for (double v : inner_r) s += v * v;
+      std::fill(r, r + k, 0.0);
+      r[0] = std::sqrt(s);
+      return true;
+    }
+    // The requested blocks' columns, then r, as one column-major m x (used + 1).
+    inner_j.resize(static_cast<size_t>(m) * static_cast<size_t>(k));
+    inner_ptr.assign(sizes.size(), nullptr);
+    int used = 0;
+    for (size_t b = 0; b < sizes.size(); ++b) {
+      if (jacobians[b] == nullptr) continue;
+      inner_ptr[b] = inner_j.data() + static_cast<size_t>(m) * used;  // row-major m x size
+      used += sizes[b];
+    }
+    if (!inner_->Evaluate(p, inner_r.data(), inner_ptr.data())) return false;
+    Eigen::MatrixXd A(m, used + 1);
+    for (size_t b = 0, col = 0; b < sizes.size(); ++b) {
+      if (inner_ptr[b] == nullptr) continue;
+      A.middleCols(static_cast<Eigen::Index>(col), sizes[b]) =
+          Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(
+              inner_ptr[b], m, sizes[b]);
+      col += static_cast<size_t>(sizes[b]);
+    }
+    A.col(used) = Eigen::Map<const Eigen::VectorXd>(inner_r.data(), m);
+    const Eigen::MatrixXd R = GramFactor(A);
+    for (int i = 0; i < k; ++i) r[i] = i <= used ? R(i, used) : 0.0;
+    for (size_t b = 0, col = 0; b < sizes.size(); ++b) {
+      if (jacobians[b] == nullptr) continue;
+      for (int i = 0; i < k; ++i) {
+        for (int c = 0; c < sizes[b]; ++c) {
+          jacobians[b][i * sizes[b] + c] = i <= used ? R(i, static_cast<Eigen::Index>(col) + c) : 0.0;
+        }
+      }
+      col += static_cast<size_t>(sizes[b]);
+    }
+    return true;
+  }
+
+ private:
+  // Upper triangular R with R^T R = A^T A: Cholesky of the Gram matrix with its
+  // columns scaled to unit norm (the Jacobian's columns differ by orders of
+  // magnitude).  A column that depends on the ones before (a pivot below
+  // rounding; a held parameter's zero column) gets a zero row: the Gram matrix
+  // is only semi-definite there, and the row adds nothing to it.
+  static Eigen::MatrixXd GramFactor(const Eigen::MatrixXd& A) {
+    const Eigen::Index n = A.cols();
+    Eigen::MatrixXd G = Eigen::MatrixXd::Zero(n, n);
+    G.selfadjointView<Eigen::Lower>().rankUpdate(A.transpose());
+    Eigen::VectorXd d(n);
+    for (Eigen::Index j = 0; j < n; ++j) d[j] = G(j, j) > 0.0 ? std::sqrt(G(j, j)) : 1.0;
+    Eigen::MatrixXd R = Eigen::MatrixXd::Zero(n, n);
+    for (Eigen::Index j = 0; j < n; ++j) {
+      for (Eigen::Index i = 0; i <= j; ++i) {
+        // Lower triangle of G: G(j, i) for i <= j.
+        double s = G(j, i) / (d[i] * d[j]);
+        for (Eigen::Index l = 0; l < i; ++l) s -= R(l, i) * R(l, j);
+        if (i < j) {
+          R(i, j) = R(i, i) > 0.0 ? s / R(i, i) : 0.0;
+        } else {
+          R(j, j) = s > kPivotFloor ? std::sqrt(s) : 0.0;
+        }
+      }
+    }
+    // Undo the scaling: column j of R times d[j].
+    for (Eigen::Index j = 0; j < n; ++j) R.col(j) *= d[j];
+    return R;
+  }
+
+  // On the unit diagonal, a pivot this small means the column is the ones
+  // before it to about 1e-7 of its norm.
+  static constexpr double kPivotFloor = 1e-14;
+
+  std::unique_ptr<ceres::CostFunction> inner_;
+  int columns_ = 0;
 };
 
 // ViewBlock hides the lens and board so that the assembly collects views of

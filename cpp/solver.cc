@@ -256,6 +256,9 @@ struct Assembled {
   // shared with every loss and view block, so that one problem serves the
   // warm-up, the robust solve and the plain residuals read after it.
   std::shared_ptr<double> loss_scale_factor = std::make_shared<double>(1.0);
+  // View blocks go to the problem as CompressedRows (for solving only: their
+  // rows are then no observations' residuals; PlainCost reads through them).
+  bool compress_views = false;
 
   // Adds a residual block of `cost` (owned here from now on) over `blocks`.
   template <class... Blocks>
@@ -271,6 +274,14 @@ struct Assembled {
     residuals.push_back(Add(cost, loss, std::forward<Blocks>(blocks)...));
     block_observations.insert(block_observations.end(), std::begin(observations), std::end(observations));
     block_observation_begin.push_back(block_observations.size());
+  }
+
+  // Residual block k's cost function with one row per observation coordinate:
+  // the one inside a CompressedRows.
+  const ceres::CostFunction& PlainCost(size_t k) const {
+    const ceres::CostFunction* f = problem->GetCostFunctionForResidualBlock(residuals[k]);
+    if (const auto* c = dynamic_cast<const CompressedRows*>(f)) return c->inner();
+    return *f;
   }
 
   // The observations behind residual block k, whose cost function has
@@ -492,7 +503,9 @@ struct ViewCollector {
   void AddTo(Assembled& a) {
     for (size_t k = 0; k < costs.size(); ++k) {
       costs[k]->Finish();
-      a.AddObservations(observations[k], costs[k].release(), nullptr, blocks[k]);
+      ceres::CostFunction* f = costs[k].release();
+      if (a.compress_views && CompressedRows::Pays(*f)) f = new CompressedRows(f);
+      a.AddObservations(observations[k], f, nullptr, blocks[k]);
     }
   }
 };
@@ -722,9 +735,12 @@ void AddPriors(const ffi::ProblemData& d, Params& p, Assembled& a) {
   }
 }
 
-Assembled Assemble(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params& p) {
+// `compress_views`: view blocks as CompressedRows, for a problem that is solved.
+Assembled Assemble(const ffi::ProblemData& d, const ffi::SolveOptions& o, Params& p,
+                   bool compress_views = false) {
   SilenceGlogOnce();
   Assembled a;
+  a.compress_views = compress_views;
   ceres::Problem::Options options;
   options.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;  // Assembled::costs
   // ValidateProblem checked every offset, so no two blocks overlap; the checks
@@ -827,7 +843,7 @@ bool PlainResiduals(const Assembled& a, std::vector<double>* by_block, double* c
   bool ok = true;
   size_t row = 0;
   for (size_t k = 0; k < a.residuals.size() && ok; ++k) {
-    const ceres::CostFunction* f = a.problem->GetCostFunctionForResidualBlock(a.residuals[k]);
+    const ceres::CostFunction* f = &a.PlainCost(k);
     a.problem->GetParameterBlocksForResidualBlock(a.residuals[k], &blocks);
     a.ObservationsOf(k, f->num_residuals());  // the rows fit
     double* r = by_block->data() + row;
@@ -953,6 +969,8 @@ std::vector<double*> FreeLayoutBlocks(const Assembled& a) {
 // parameter blocks, rows sorted into observation order; residuals block after block.
 bool EvaluateWithJacobian(Assembled& a, int threads, double* cost, std::vector<double>* by_block,
                           ceres::CRSMatrix* jacobian, const double* base, std::vector<uint32_t>* columns) {
+  // Problem::Evaluate would read compressed rows as observations'.
+  if (a.compress_views) Fail("internal: the Jacobian of a problem assembled for solving");
   ceres::Problem::EvaluateOptions e;
   e.residual_blocks = a.residuals;
   e.apply_loss_function = false;
@@ -1037,7 +1055,7 @@ void DirectJacobian(const Assembled& a, const double* base, size_t num_observati
   std::vector<const std::pair<uint32_t, std::vector<int>>*> free;
   std::vector<double> r;
   for (size_t k = 0; k < a.residuals.size(); ++k) {
-    const ceres::CostFunction* cost = problem.GetCostFunctionForResidualBlock(a.residuals[k]);
+    const ceres::CostFunction* cost = &a.PlainCost(k);
     problem.GetParameterBlocksForResidualBlock(a.residuals[k], &blocks);
     const std::vector<int32_t>& sizes = cost->parameter_block_sizes();
     const int nres = cost->num_residuals();
@@ -1289,7 +1307,7 @@ SolveReport solve(ProblemData& data, const SolveOptions& options) {
   const auto start = std::chrono::steady_clock::now();
   ValidateProblem(data, options);
   Params params(data);
-  Assembled a = Assemble(data, options, params);
+  Assembled a = Assemble(data, options, params, options.compress_view_rows);
   ceres::Solver::Options s = MakeSolverOptions(options);
   ChooseLinearSolver(a, s);
   std::string why;

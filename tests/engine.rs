@@ -321,6 +321,82 @@ fn per_view_blocks_and_warm_up_reach_the_per_corner_optimum() {
 }
 
 #[test]
+fn compressed_view_rows_take_the_same_steps() {
+    // Each view block goes to Ceres as the factor R of its [J r] (one row per
+    // Jacobian column, one for the residual), which has the block's cost,
+    // gradient and Gauss-Newton matrix: every stage must take the same steps
+    // as with the block's own rows, so the same iterations, the same rejected
+    // corners and the same answer to rounding. A rig (its camera-from-camera
+    // block), a held parameter, weights, outliers and a fisheye exercise every
+    // column.
+    let rig = {
+        let (mut d, _) =
+            deformcal::model::synthetic::Generator::new(Preset::Stereo, Some(20), 5).generate();
+        d.cameras[1].fix = vec!["k3".into()];
+        for (i, o) in d.observations.iter_mut().enumerate() {
+            o.weight = if i % 5 == 0 { 0.5 } else { 1.0 };
+            if i % 89 == 0 {
+                o.uv[0] += 6.0;
+            }
+        }
+        d
+    };
+    let fisheye = deformcal::model::synthetic::Generator::new(Preset::T2, Some(25), 7)
+        .with_models(&[deformcal::LensModel::DoubleSphere])
+        .generate()
+        .0;
+    for (name, d) in [("rig", &rig), ("ds", &fisheye)] {
+        for m in [Method::Standard, Method::Dynamic, Method::Dynamic4] {
+            let solve = |compress_view_rows: bool| {
+                let settings = SolverSettings {
+                    compress_view_rows,
+                    ..SolverSettings::default()
+                };
+                deformcal::calibrate(
+                    d,
+                    &deformcal::Request {
+                        method: m,
+                        settings,
+                        gauge: None,
+                    },
+                )
+                .unwrap()
+            };
+            let (rows, compressed) = (solve(false), solve(true));
+            let iterations =
+                |c: &Calibration| c.stages.iter().map(|s| s.iterations).collect::<Vec<_>>();
+            assert_eq!(iterations(&rows), iterations(&compressed), "{name} {m}");
+            let rejected = |c: &Calibration| {
+                c.rejected
+                    .iter()
+                    .map(|s| (s.camera.clone(), s.frame, s.corner))
+                    .collect::<Vec<_>>()
+            };
+            assert_eq!(rejected(&rows), rejected(&compressed), "{name} {m}");
+            let (a, b) = (
+                rows.stages.last().unwrap(),
+                compressed.stages.last().unwrap(),
+            );
+            assert!(
+                (a.final_cost - b.final_cost).abs() <= 1e-9 * a.final_cost,
+                "{name} {m}: cost {} vs {}",
+                a.final_cost,
+                b.final_cost
+            );
+            for (k, cam) in d.cameras.iter().enumerate() {
+                let e = deformcal::model::metrics::mapping_error(
+                    &rows.state.intrinsics[k],
+                    &compressed.state.intrinsics[k],
+                    cam.width,
+                    cam.height,
+                );
+                assert!(e < 1e-6, "{name} {m} camera {k}: {e} px between the two");
+            }
+        }
+    }
+}
+
+#[test]
 fn a_loss_free_warm_up_of_a_fresh_bend_stage_reaches_the_same_optimum() {
     // `dynamic`'s own stage starts from unbent boards and runs a warm-up with a
     // wider loss once 5 % of the corners lie beyond the loss's scale (the

@@ -252,6 +252,7 @@ impl From<&CalibrationConfig> for SolverSettings {
             verbose: c.verbose,
             reference_jacobian: false,
             per_corner_blocks: false,
+            compress_view_rows: true,
             warm_up: SolverSettings::default().warm_up,
             outlier_k: c.outlier_k,
             board: BoardPriors {

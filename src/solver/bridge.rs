@@ -86,6 +86,10 @@ pub mod ffi {
         /// checked against: one residual block per corner, Ceres' Cauchy loss
         /// from the first iteration.
         per_corner_blocks: bool,
+        /// Hand view blocks to Ceres as one row per column of their Jacobian
+        /// and one for the residual (`CompressedRows` in `cpp/residuals.h`): the
+        /// same steps, fewer rows. Off only to check that claim.
+        compress_view_rows: bool,
         /// Share of the corners beyond the loss's scale above which a robust
         /// solve first runs a warm-up (see `problem::WarmUp`).
         warm_up_share: f64,

@@ -16,6 +16,7 @@ fn options() -> SolveOptions {
         verbose: false,
         reference_jacobian: false,
         per_corner_blocks: false,
+        compress_view_rows: true,
         warm_up_share: 0.5,
         warm_up_scale_factor: 0.0,
     }

@@ -50,6 +50,9 @@ pub struct SolverSettings {
     /// warm-up: one residual block per corner, Ceres' Cauchy loss throughout (slower;
     /// the reference the faster path is checked against).
     pub per_corner_blocks: bool,
+    /// Hand each view block to Ceres as one row per Jacobian column and one for
+    /// the residual (the same steps on fewer rows); off only to check that.
+    pub compress_view_rows: bool,
     /// When a robust solve first runs a warm-up, and with which loss.
     pub warm_up: WarmUp,
     /// Outlier rejection threshold in noise standard deviations (0: off); see
@@ -118,6 +121,7 @@ impl Default for SolverSettings {
             verbose: false,
             reference_jacobian: false,
             per_corner_blocks: false,
+            compress_view_rows: true,
             warm_up: WarmUp::FAR_START,
             outlier_k: 4.0,
             board: BoardPriors::default(),
@@ -158,6 +162,7 @@ impl SolverSettings {
             verbose: self.verbose,
             reference_jacobian: self.reference_jacobian,
             per_corner_blocks: self.per_corner_blocks,
+            compress_view_rows: self.compress_view_rows,
             warm_up_share: self.warm_up.share,
             warm_up_scale_factor: self.warm_up.scale_factor,
         }
