@@ -3,7 +3,7 @@
 use crate::error::{Error, Result};
 use crate::model::lens::Intrinsics;
 use crate::model::pose::Pose;
-use nalgebra::{DMatrix, Matrix3, Rotation3, SMatrix, SVector, Vector2, Vector3};
+use nalgebra::{DMatrix, Matrix3, Rotation3, SMatrix, Vector2, Vector3};
 
 /// Hartley normalisation: centroid at the origin, mean distance √2.
 fn normalisation(points: &[Vector2<f64>]) -> Matrix3<f64> {
@@ -26,19 +26,29 @@ pub fn homography(board: &[Vector2<f64>], image: &[Vector2<f64>]) -> Option<Matr
     }
     let tb = normalisation(board);
     let ti = normalisation(image);
-    // AᵀA accumulated row by row: the 2n × 9 matrix A itself is never needed.
-    let mut ata = SMatrix::<f64, 9, 9>::zeros();
+    // AᵀA without A: a point's two rows are (−bᵀ, 0, u bᵀ) and (0, −bᵀ, v bᵀ)
+    // with b = (x, y, 1), so AᵀA is made of four sums of bbᵀ, weighted by 1, u,
+    // v and u² + v² (a fifth of the work of accumulating the rows, which the
+    // fisheye initialisation's focal-length search does hundreds of times).
+    let mut sums = [Matrix3::<f64>::zeros(); 4];
     for (b, i) in board.iter().zip(image) {
         let b = apply(&tb, b);
         let i = apply(&ti, i);
-        let rows = [
-            SVector::<f64, 9>::from([-b.x, -b.y, -1.0, 0.0, 0.0, 0.0, i.x * b.x, i.x * b.y, i.x]),
-            SVector::<f64, 9>::from([0.0, 0.0, 0.0, -b.x, -b.y, -1.0, i.y * b.x, i.y * b.y, i.y]),
-        ];
-        for r in &rows {
-            ata.syger(1.0, r, r, 1.0);
+        let b = Vector3::new(b.x, b.y, 1.0);
+        let bbt = b * b.transpose();
+        for (sum, w) in sums.iter_mut().zip([1.0, i.x, i.y, i.x * i.x + i.y * i.y]) {
+            *sum += w * bbt;
         }
     }
+    let [m, mu, mv, mr] = sums;
+    let mut ata = SMatrix::<f64, 9, 9>::zeros();
+    ata.fixed_view_mut::<3, 3>(0, 0).copy_from(&m);
+    ata.fixed_view_mut::<3, 3>(3, 3).copy_from(&m);
+    ata.fixed_view_mut::<3, 3>(0, 6).copy_from(&-mu);
+    ata.fixed_view_mut::<3, 3>(6, 0).copy_from(&-mu);
+    ata.fixed_view_mut::<3, 3>(3, 6).copy_from(&-mv);
+    ata.fixed_view_mut::<3, 3>(6, 3).copy_from(&-mv);
+    ata.fixed_view_mut::<3, 3>(6, 6).copy_from(&mr);
     // The null vector of A is the eigenvector of AᵀA with the smallest eigenvalue.
     let eig = ata.symmetric_eigen();
     let (imin, _) = eig
@@ -367,5 +377,22 @@ mod tests {
         let collinear: Vec<Vector2<f64>> = (0..6).map(|i| Vector2::new(i as f64, 0.0)).collect();
         let rays = vec![Vector3::new(0.0, 0.0, 1.0); 6];
         assert!(pose_from_rays(&collinear, &rays).is_none());
+    }
+
+    /// A known projective map of board points (pixel scale, strong perspective)
+    /// is recovered to rounding, and collinear points give none.
+    #[test]
+    fn homography_recovers_a_known_map() {
+        let truth = Matrix3::new(1450.0, 35.0, 610.0, -22.0, 1390.0, 410.0, 0.21, -0.34, 1.0);
+        let board: Vec<Vector2<f64>> = (0..48)
+            .map(|i| Vector2::new((i % 8) as f64 * 0.04, (i / 8) as f64 * 0.04))
+            .collect();
+        let image: Vec<Vector2<f64>> = board.iter().map(|b| apply(&truth, b)).collect();
+        let h = homography(&board, &image).expect("a homography");
+        let off = (h - truth).norm() / truth.norm();
+        assert!(off < 1e-10, "relative error {off:e}\n{h}");
+        let line: Vec<Vector2<f64>> = (0..8).map(|i| Vector2::new(i as f64 * 0.04, 0.1)).collect();
+        let image: Vec<Vector2<f64>> = line.iter().map(|b| apply(&truth, b)).collect();
+        assert!(homography(&line, &image).is_none());
     }
 }
