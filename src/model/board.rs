@@ -49,24 +49,31 @@ impl Method {
 
     /// The registry entry: the board model behind the method.
     pub fn info(self) -> BoardModelInfo {
-        let (name, frame_params, corner_params, gauge_corners, gauge_dof) = match self {
-            Method::Standard => ("standard", 0, 0, 0, 0),
-            // 7 DOF: two corners fully, the z of a third (SPEC §2).
-            Method::Static => ("static", 0, 3, 3, 7),
-            Method::Dynamic => ("dynamic", PARABOLOID_PARAMS, 0, 0, 0),
-            // 4 DOF: (Δx, Δy) of two corners.
-            Method::Full => ("full", PARABOLOID_PARAMS, 2, 2, 4),
-            Method::Dynamic3 => ("dynamic3", bend_terms(3), 0, 0, 0),
-            Method::Dynamic4 => ("dynamic4", bend_terms(4), 0, 0, 0),
-            Method::Full3 => ("full3", bend_terms(3), 2, 2, 4),
-            Method::Full4 => ("full4", bend_terms(4), 2, 2, 4),
-        };
+        let (name, frame_params, corner_params, gauge_corners, gauge_dof, tolerance_scale) =
+            match self {
+                Method::Standard => ("standard", 0, 0, 0, 0, 1.0),
+                // 7 DOF: two corners fully, the z of a third (SPEC §2). Its solves
+                // converge linearly (each step about 0.45 of the one before, on
+                // 25-image t2 sets), so a relative cost change of 1e-8 comes while
+                // the intrinsics still move: one opencv5 set stopped 0.027 px from
+                // the optimum converged to 1e-15, and 0.005 px at 1e-10, two
+                // iterations later; the parameter tolerance stops the others first.
+                Method::Static => ("static", 0, 3, 3, 7, 0.01),
+                Method::Dynamic => ("dynamic", PARABOLOID_PARAMS, 0, 0, 0, 1.0),
+                // 4 DOF: (Δx, Δy) of two corners.
+                Method::Full => ("full", PARABOLOID_PARAMS, 2, 2, 4, 1.0),
+                Method::Dynamic3 => ("dynamic3", bend_terms(3), 0, 0, 0, 1.0),
+                Method::Dynamic4 => ("dynamic4", bend_terms(4), 0, 0, 0, 1.0),
+                Method::Full3 => ("full3", bend_terms(3), 2, 2, 4, 1.0),
+                Method::Full4 => ("full4", bend_terms(4), 2, 2, 4, 1.0),
+            };
         BoardModelInfo {
             name,
             frame_params,
             corner_params,
             gauge_corners,
             gauge_dof,
+            function_tolerance_scale: tolerance_scale,
         }
     }
 
@@ -168,7 +175,7 @@ pub fn max_bend(target: &Target, p: &Paraboloid, h: &HigherBend) -> f64 {
 
 /// What the board-model registry knows of a method's board model; the C++ model
 /// of the same name in `cpp/board.h` has the same sizes (checked by a test).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct BoardModelInfo {
     /// The method's name, also the C++ model's `kName`.
     pub name: &'static str,
@@ -180,6 +187,9 @@ pub struct BoardModelInfo {
     pub gauge_corners: usize,
     /// Correction values those corners hold.
     pub gauge_dof: usize,
+    /// Factor on the function tolerance of this model's solves, for a model
+    /// whose solves still move the intrinsics after the cost has settled.
+    pub function_tolerance_scale: f64,
 }
 
 impl fmt::Display for Method {

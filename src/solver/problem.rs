@@ -416,7 +416,12 @@ impl Problem<'_> {
     /// Refines `state` in place; an unusable solve is an error, a non-converged one is reported.
     pub fn solve(&self, state: &mut State, settings: &SolverSettings) -> Result<SolveReport> {
         let what = format!("{} method", self.method);
-        self.run(state, settings, ffi::solve, &what)
+        let settings = SolverSettings {
+            function_tolerance: settings.function_tolerance
+                * self.method.info().function_tolerance_scale,
+            ..settings.clone()
+        };
+        self.run(state, &settings, ffi::solve, &what)
     }
 
     /// The same as [`Problem::solve`] for a pose-only refit (everything but the
