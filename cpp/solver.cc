@@ -775,7 +775,7 @@ void ValidateProblem(const ffi::ProblemData& d, const ffi::SolveOptions& o) {
 // `static` but takes 2.8x the iterations for `full` (inexact steps on the
 // weakly determined bend); on the 650-image reference it saved under 10%.
 // At 400 and 1600 t2 images (`cargo bench --bench speed -- growth`, `full`,
-// poses eliminated, a 514-wide reduced system) dense Schur took 0.97 s and
+// poses eliminated, a 341-wide reduced system) dense Schur took 0.97 s and
 // 3.5 s, iterative Schur 1.4 s and 7.8 s (more iterations again), sparse Schur
 // 4.1 s at 1600; for `standard` at 1600 dense 0.74 s, iterative 0.80 s.  So
 // dense stays up to 1200 reduced parameters and iterative Schur is not used.
