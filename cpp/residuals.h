@@ -402,10 +402,12 @@ class InCornerGroup final : public ceres::CostFunction {
 // [J r] (R^T R = [J r]^T [J r]).  Its first c columns are the Jacobian and its
 // last the residual, so the cost |r|^2 / 2, the gradient J^T r and the
 // Gauss-Newton matrix J^T J (hence every Levenberg-Marquardt step, the jacobi
-// scaling and the model cost change) are the inner block's, to rounding: the
-// solve takes the same steps, while Ceres' Schur elimination and its Jacobian
-// bookkeeping work on 13 rows per view (ds, standard) instead of 338.
-// Residual-only evaluations (Ceres reads only their cost) give (|r|, 0, ...).
+// scaling and the model cost change) are the inner block's, to rounding (and,
+// where a column is within about 1e-7 of depending on the ones before it, to
+// that: its pivot is dropped): the solve takes the same steps, while Ceres'
+// Schur elimination and its Jacobian bookkeeping work on 13 rows per view (ds,
+// standard) instead of 338.  Residual-only evaluations (Ceres reads only their
+// cost) give (|r|, 0, ...), so Ceres' check_gradients cannot be used on them.
 // The plain per-corner residuals stay with the inner block (inner()).
 class CompressedRows final : public ceres::CostFunction {
  public:
@@ -439,7 +441,8 @@ class CompressedRows final : public ceres::CostFunction {
       r[0] = std::sqrt(s);
       return true;
     }
-    // The requested blocks' columns, then r, as one column-major m x (used + 1).
+    // The inner block's Jacobian of each requested block, row-major m x size,
+    // side by side in one buffer; A below gathers them and r column-major.
     inner_j.resize(static_cast<size_t>(m) * static_cast<size_t>(k));
     inner_ptr.assign(sizes.size(), nullptr);
     int used = 0;
