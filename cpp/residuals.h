@@ -413,15 +413,12 @@ class CompressedRows final : public ceres::CostFunction {
  public:
   explicit CompressedRows(ceres::CostFunction* inner) : inner_(inner) {
     *mutable_parameter_block_sizes() = inner->parameter_block_sizes();
-    for (int32_t size : parameter_block_sizes()) columns_ += size;
-    set_num_residuals(columns_ + 1);
+    set_num_residuals(Columns(*inner) + 1);
   }
 
   // Whether compressing `inner` saves rows.
   static bool Pays(const ceres::CostFunction& inner) {
-    int columns = 0;
-    for (int32_t size : inner.parameter_block_sizes()) columns += size;
-    return inner.num_residuals() > columns + 1;
+    return inner.num_residuals() > Columns(inner) + 1;
   }
 
   const ceres::CostFunction& inner() const { return *inner_; }
@@ -515,8 +512,14 @@ class CompressedRows final : public ceres::CostFunction {
   // before it to about 1e-7 of its norm.
   static constexpr double kPivotFloor = 1e-14;
 
+  // The Jacobian columns of `f`: the sum of its parameter blocks' sizes.
+  static int Columns(const ceres::CostFunction& f) {
+    int columns = 0;
+    for (int32_t size : f.parameter_block_sizes()) columns += size;
+    return columns;
+  }
+
   std::unique_ptr<ceres::CostFunction> inner_;
-  int columns_ = 0;
 };
 
 // ViewBlock hides the lens and board so that the assembly collects views of

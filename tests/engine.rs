@@ -297,24 +297,11 @@ fn per_view_blocks_and_warm_up_reach_the_per_corner_optimum() {
                 max_iterations: 500,
                 ..SolverSettings::default()
             };
-            deformcal::calibrate(
-                &d,
-                &deformcal::Request {
-                    method: m,
-                    settings,
-                    gauge: None,
-                },
-            )
-            .unwrap()
+            run_with(&d, m, settings)
         };
         let (old, new) = (solve(true), solve(false));
-        for (k, cam) in d.cameras.iter().enumerate() {
-            let e = deformcal::model::metrics::mapping_error(
-                &old.state.intrinsics[k],
-                &new.state.intrinsics[k],
-                cam.width,
-                cam.height,
-            );
+        for k in 0..d.cameras.len() {
+            let e = intrinsics_apart(&d, &old, &new, k);
             assert!(e < 1e-3, "{m} camera {k}: {e} px between the two paths");
         }
     }
@@ -329,17 +316,7 @@ fn static_at_default_tolerances_stops_near_its_optimum() {
     let (d, _) = deformcal::model::synthetic::Generator::new(Preset::T2, Some(25), 8)
         .with_models(&[deformcal::LensModel::OpenCv5])
         .generate();
-    let solve = |settings: SolverSettings| {
-        deformcal::calibrate(
-            &d,
-            &deformcal::Request {
-                method: Method::Static,
-                settings,
-                gauge: None,
-            },
-        )
-        .unwrap()
-    };
+    let solve = |settings: SolverSettings| run_with(&d, Method::Static, settings);
     let default = solve(SolverSettings::default());
     let tight = solve(SolverSettings {
         function_tolerance: 1e-15,
@@ -348,13 +325,7 @@ fn static_at_default_tolerances_stops_near_its_optimum() {
         max_iterations: 1000,
         ..SolverSettings::default()
     });
-    let cam = &d.cameras[0];
-    let e = deformcal::model::metrics::mapping_error(
-        &default.state.intrinsics[0],
-        &tight.state.intrinsics[0],
-        cam.width,
-        cam.height,
-    );
+    let e = intrinsics_apart(&d, &default, &tight, 0);
     assert!(e < 0.01, "{e} px from the converged optimum");
 }
 
@@ -390,15 +361,7 @@ fn compressed_view_rows_take_the_same_steps() {
                     compress_view_rows,
                     ..SolverSettings::default()
                 };
-                deformcal::calibrate(
-                    d,
-                    &deformcal::Request {
-                        method: m,
-                        settings,
-                        gauge: None,
-                    },
-                )
-                .unwrap()
+                run_with(d, m, settings)
             };
             let (rows, compressed) = (solve(false), solve(true));
             let iterations =
@@ -421,13 +384,8 @@ fn compressed_view_rows_take_the_same_steps() {
                 a.final_cost,
                 b.final_cost
             );
-            for (k, cam) in d.cameras.iter().enumerate() {
-                let e = deformcal::model::metrics::mapping_error(
-                    &rows.state.intrinsics[k],
-                    &compressed.state.intrinsics[k],
-                    cam.width,
-                    cam.height,
-                );
+            for k in 0..d.cameras.len() {
+                let e = intrinsics_apart(d, &rows, &compressed, k);
                 assert!(e < 1e-6, "{name} {m} camera {k}: {e} px between the two");
             }
         }

@@ -26,6 +26,11 @@ pub fn run_k(dataset: &Dataset, method: Method, loss: Loss, outlier_k: f64) -> C
         outlier_k,
         ..SolverSettings::default()
     };
+    run_with(dataset, method, settings)
+}
+
+/// Calibrates with the given settings and the default gauge.
+pub fn run_with(dataset: &Dataset, method: Method, settings: SolverSettings) -> Calibration {
     calibrate(
         dataset,
         &Request {
@@ -35,6 +40,17 @@ pub fn run_k(dataset: &Dataset, method: Method, loss: Loss, outlier_k: f64) -> C
         },
     )
     .unwrap_or_else(|e| panic!("{method} failed: {e}"))
+}
+
+/// Mapping error between two calibrations' intrinsics of camera `k` of `dataset`.
+pub fn intrinsics_apart(dataset: &Dataset, a: &Calibration, b: &Calibration, k: usize) -> f64 {
+    let cam = &dataset.cameras[k];
+    mapping_error(
+        &a.state.intrinsics[k],
+        &b.state.intrinsics[k],
+        cam.width,
+        cam.height,
+    )
 }
 
 /// Mapping error of a calibration against the truth.
