@@ -261,11 +261,8 @@ fn run_calibrate(args: CalibrateArgs) -> Result<()> {
     let first = match config.calibration.method {
         MethodChoice::Fixed(m) => m,
         MethodChoice::Auto => {
-            // Too few images for the folds is no fault of the data: no hints.
-            deformcal::solver::select::check(
-                &loaded.dataset,
-                &AutoSettings::from(&config.calibration),
-            )?;
+            // Settings `auto` cannot run with are no fault of the data: no hints.
+            deformcal::solver::select::check(&AutoSettings::from(&config.calibration))?;
             Method::Standard
         }
     };
@@ -344,7 +341,8 @@ fn run_method(config: &Config, dataset: &deformcal::Dataset) -> Result<deformcal
         MethodChoice::Fixed(m) => Ok(calibrate(dataset, &request(m))?),
         MethodChoice::Auto => {
             let auto = AutoSettings::from(c);
-            let solves = auto.candidates.len() * (auto.folds + 1);
+            let folds = auto.folds_for(dataset.num_frames());
+            let solves = auto.candidates.len() * (folds + 1);
             let bar = indicatif::ProgressBar::new(solves as u64).with_style(
                 indicatif::ProgressStyle::with_template(
                     "auto: {msg} [{bar:40}] {pos}/{len} calibrations, {elapsed} elapsed, ETA {eta}",
@@ -352,7 +350,7 @@ fn run_method(config: &Config, dataset: &deformcal::Dataset) -> Result<deformcal
                 .expect("valid template")
                 .progress_chars("=> "),
             );
-            bar.set_message(format!("{}-fold cross-validation", auto.folds));
+            bar.set_message(format!("{folds}-fold cross-validation"));
             let result = calibrate_auto(dataset, &request(Method::Standard), &auto, &|| bar.inc(1));
             bar.finish_and_clear();
             Ok(result?)

@@ -40,21 +40,6 @@ fn ok(out: &Output) -> String {
     String::from_utf8_lossy(&out.stdout).to_string()
 }
 
-/// Moves `fraction` of the observations by `lo`–`hi` px in a spread of directions.
-fn displace(d: &mut deformcal::Dataset, percent: usize, lo: f64, hi: f64) -> usize {
-    let mut n = 0;
-    for (i, o) in d.observations.iter_mut().enumerate() {
-        if (i * 7919) % 100 < percent {
-            let a = i as f64 * 2.399;
-            let r = lo + (hi - lo) * ((i * 31) % 97) as f64 / 96.0;
-            o.uv[0] += r * a.cos();
-            o.uv[1] += r * a.sin();
-            n += 1;
-        }
-    }
-    n
-}
-
 fn truth_rot(c: &deformcal::Calibration, t: &deformcal::model::synthetic::Truth) -> f64 {
     let cam = &c.dataset.cameras[0];
     mapping_error_rot(

@@ -44,15 +44,21 @@ pub struct CalibrationConfig {
     /// The largest RMSE a result may have, pixels; replaces the default guard
     /// rails on the RMSE (`app::guard`).
     pub max_rmse_px: Option<f64>,
+    /// Whether the board priors that are not set explicitly are on: `"auto"` (the
+    /// default: `static_prior_mm` and `bend_prior_mm` estimated from the data) or
+    /// `"none"` (the paper's prior-free model).
+    pub priors: Priors,
     /// 1σ of the board's print / flatness error, mm: a Gaussian prior on every
-    /// static correction value (off by default: the paper's model), or "auto".
+    /// static correction value, "auto" (estimated from the data) or "none";
+    /// unset, `priors` decides. Read it through [`CalibrationConfig::static_prior`].
     #[serde(deserialize_with = "static_prior_mm")]
     pub static_prior_mm: Option<PriorSigma>,
     /// Order of the per-image polynomial bend of `dynamic` / `full` (2: the
     /// paper's paraboloid), or `auto` (chosen by cross-validation).
     pub bend_order: BendOrder,
     /// 1σ of each bend term's out-of-plane reach at the board's corner, mm: a
-    /// zero-mean prior on the bend amplitudes (off by default), or "auto".
+    /// zero-mean prior on the bend amplitudes, "auto" or "none"; unset, `priors`
+    /// decides. Read it through [`CalibrationConfig::bend_prior`].
     #[serde(deserialize_with = "bend_prior_mm")]
     pub bend_prior_mm: Option<PriorSigma>,
     /// 1σ of each bend term's change between consecutive frames, mm at the
@@ -105,13 +111,29 @@ impl TryFrom<NumberOrName<i64>> for BendOrder {
 }
 
 /// `[calibration] static_prior_mm`, `bend_prior_mm` and `bend_smoothness`: a prior's σ in
-/// millimetres, or "auto" (estimated from the data, `solver::auto_prior`).
+/// millimetres, "auto" (estimated from the data, `solver::auto_prior`) or "none".
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum PriorSigma {
     /// This σ, millimetres.
     Mm(f64),
     /// Empirical Bayes.
     Auto,
+    /// No prior.
+    Off,
+}
+
+/// `[calibration] priors`: the board priors a config does not set itself.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Priors {
+    /// The static and bend priors estimated from the data: on rigid and bending
+    /// boards alike within a few per cent of the best method's error, where
+    /// without them `full` was up to 2–5× worse than `standard` on a rigid board
+    /// (docs/benchmarks.md, "Default priors").
+    #[default]
+    Auto,
+    /// The paper's model: no prior on the board.
+    None,
 }
 
 #[derive(Deserialize)]
@@ -123,12 +145,17 @@ enum RawPriorSigma {
 }
 
 impl PriorSigma {
-    /// The fixed σ, millimetres (`None` for "auto").
+    /// The fixed σ, millimetres (`None` for "auto" and "none").
     pub fn mm(self) -> Option<f64> {
         match self {
             PriorSigma::Mm(v) => Some(v),
-            PriorSigma::Auto => None,
+            PriorSigma::Auto | PriorSigma::Off => None,
         }
+    }
+
+    /// The prior as it acts: `None` when off.
+    fn on(self) -> Option<PriorSigma> {
+        (self != PriorSigma::Off).then_some(self)
     }
 
     /// Reads the value of `key`; the error names the key (serde's does not).
@@ -139,12 +166,13 @@ impl PriorSigma {
         match RawPriorSigma::deserialize(d)? {
             RawPriorSigma::Number(v) => Ok(Some(PriorSigma::Mm(v))),
             RawPriorSigma::Name(s) if s == "auto" => Ok(Some(PriorSigma::Auto)),
+            RawPriorSigma::Name(s) if s == "none" => Ok(Some(PriorSigma::Off)),
             RawPriorSigma::Name(s) => Err(serde::de::Error::custom(format!(
-                "{key} must be a number of millimetres or \"auto\" (got \"{}\")",
+                "{key} must be a number of millimetres, \"auto\" or \"none\" (got \"{}\")",
                 short(&s)
             ))),
             RawPriorSigma::Other(v) => Err(serde::de::Error::custom(format!(
-                "{key} must be a number of millimetres or \"auto\" (got {})",
+                "{key} must be a number of millimetres, \"auto\" or \"none\" (got {})",
                 short(&v.to_string())
             ))),
         }
@@ -200,7 +228,7 @@ impl Default for CalibrationConfig {
         let s = SolverSettings::default();
         let auto = AutoSettings::default();
         CalibrationConfig {
-            method: MethodChoice::Fixed(Method::Full),
+            method: MethodChoice::Auto,
             auto_candidates: auto.candidates,
             cv_folds: auto.folds,
             cv_seed: auto.seed,
@@ -216,6 +244,7 @@ impl Default for CalibrationConfig {
             outlier_k: s.outlier_k,
             detector_noise_px: None,
             max_rmse_px: None,
+            priors: Priors::Auto,
             static_prior_mm: None,
             bend_order: BendOrder::Fixed(2),
             bend_prior_mm: None,
@@ -223,6 +252,26 @@ impl Default for CalibrationConfig {
             max_bend_mm: DEFAULT_MAX_BEND_MM,
             lens_prior: LensPrior(s.lens_prior_sigma),
             geometry: None,
+        }
+    }
+}
+
+impl CalibrationConfig {
+    /// The static prior as it acts: the key's value, else what `priors` says.
+    pub fn static_prior(&self) -> Option<PriorSigma> {
+        self.resolved(self.static_prior_mm)
+    }
+
+    /// The bend prior as it acts: the key's value, else what `priors` says.
+    pub fn bend_prior(&self) -> Option<PriorSigma> {
+        self.resolved(self.bend_prior_mm)
+    }
+
+    fn resolved(&self, given: Option<PriorSigma>) -> Option<PriorSigma> {
+        match (given, self.priors) {
+            (Some(p), _) => p.on(),
+            (None, Priors::Auto) => Some(PriorSigma::Auto),
+            (None, Priors::None) => None,
         }
     }
 }
@@ -256,10 +305,10 @@ impl From<&CalibrationConfig> for SolverSettings {
             warm_up: SolverSettings::default().warm_up,
             outlier_k: c.outlier_k,
             board: BoardPriors {
-                static_sigma_m: c.static_prior_mm.and_then(PriorSigma::mm).map(|v| v * 1e-3),
-                static_sigma_auto: c.static_prior_mm == Some(PriorSigma::Auto),
-                bend_sigma_m: c.bend_prior_mm.and_then(PriorSigma::mm).map(|v| v * 1e-3),
-                bend_sigma_auto: c.bend_prior_mm == Some(PriorSigma::Auto),
+                static_sigma_m: c.static_prior().and_then(PriorSigma::mm).map(|v| v * 1e-3),
+                static_sigma_auto: c.static_prior() == Some(PriorSigma::Auto),
+                bend_sigma_m: c.bend_prior().and_then(PriorSigma::mm).map(|v| v * 1e-3),
+                bend_sigma_auto: c.bend_prior() == Some(PriorSigma::Auto),
                 smoothness_sigma_m: c.bend_smoothness.and_then(PriorSigma::mm).map(|v| v * 1e-3),
                 smoothness_auto: c.bend_smoothness == Some(PriorSigma::Auto),
                 geometry: c.geometry.clone(),

@@ -35,12 +35,7 @@ pub fn summary_with(c: &Calibration, warnings: &[String]) -> String {
         c.seconds,
         c.rmse_px
     );
-    let _ = writeln!(
-        s,
-        "  outliers rejected: {} (beyond {}σ; listed in outliers.csv)",
-        c.rejected.len(),
-        c.settings.outlier_k
-    );
+    let _ = writeln!(s, "  {}", rejection_line(c));
     write_trust(&mut s, c);
     if let Some(sel) = &c.selection {
         write_selection(&mut s, sel, c);
@@ -52,6 +47,19 @@ pub fn summary_with(c: &Calibration, warnings: &[String]) -> String {
         let _ = writeln!(s, "  warning: {w}");
     }
     s
+}
+
+/// What outlier rejection did, in one line.
+fn rejection_line(c: &Calibration) -> String {
+    let k = c.settings.outlier_k;
+    match c.rejected.len() {
+        _ if k <= 0.0 => "outlier rejection: off (calibration.outlier_k = 0)".to_string(),
+        0 => format!("outliers rejected: none beyond {k}σ"),
+        n => format!(
+            "outliers rejected: {n} beyond {k}σ (listed in outliers.csv); the result is a fresh \
+             calibration of the observations kept"
+        ),
+    }
 }
 
 /// The noise, the bias ratio and what it suggests (SPEC §3a).
@@ -101,6 +109,10 @@ pub fn trust_verdict(c: &Calibration, t: &Trust) -> String {
 
 /// `auto`'s table of candidates and its verdict.
 fn write_selection(s: &mut String, sel: &Selection, c: &Calibration) {
+    if sel.candidates.is_empty() {
+        let _ = writeln!(s, "  auto: {}", sel.reason);
+        return;
+    }
     let _ = writeln!(
         s,
         "  auto: {}-fold cross-validation over frames (seed {})",

@@ -297,6 +297,16 @@ pub struct BoardPriors {
 pub const MIN_GEOMETRY_STD_M: f64 = 1e-6;
 
 impl BoardPriors {
+    /// The project's default: the static and bend priors' σ estimated from the
+    /// data (`priors = "auto"`); [`BoardPriors::default`] is the paper's, none.
+    pub fn estimated() -> Self {
+        BoardPriors {
+            static_sigma_auto: true,
+            bend_sigma_auto: true,
+            ..BoardPriors::default()
+        }
+    }
+
     /// Whether any prior is on (and so the noise that weights them is needed).
     pub fn any(&self) -> bool {
         self.static_sigma_m.is_some()

@@ -60,6 +60,23 @@ pub struct AutoSettings {
     pub detector_noise_px: Option<f64>,
 }
 
+/// Fewest frames per fold: a held-out error from fewer frames is mostly noise,
+/// so a capture too small for `folds` folds of this many is left out one by one.
+pub const MIN_FRAMES_PER_FOLD: usize = 2;
+
+impl AutoSettings {
+    /// The folds used on `frames` frames: the configured number where every fold
+    /// gets [`MIN_FRAMES_PER_FOLD`] frames, else one per frame (leave-one-out),
+    /// so that a small capture is still judged rather than refused.
+    pub fn folds_for(&self, frames: usize) -> usize {
+        if frames >= self.folds * MIN_FRAMES_PER_FOLD {
+            self.folds
+        } else {
+            frames
+        }
+    }
+}
+
 impl Default for AutoSettings {
     fn default() -> Self {
         AutoSettings {
@@ -198,38 +215,72 @@ pub fn choose(entries: &mut [(Candidate, Option<HeldOut>)]) -> Option<(usize, St
         (h.mse() - best_mse <= noise).then_some(())
     };
     let chosen = (0..best).find(|&i| within(i).is_some()).unwrap_or(best);
+    Some((chosen, reason(entries, chosen, best)))
+}
+
+/// What a board model adds to a rigid board, in a user's words.
+fn models(m: Method) -> &'static str {
+    match (m.has_paraboloid(), m.has_correction()) {
+        (true, true) => "each photo's bend and a fixed correction of every corner",
+        (true, false) => "each photo's bend",
+        (false, true) => "a fixed correction of every corner",
+        (false, false) => "nothing beyond a rigid board",
+    }
+}
+
+/// Why `auto` chose `entries[chosen]` (`best` has the lowest score), in one
+/// sentence a user understands; `entries[0]` is the simplest candidate.
+fn reason(entries: &[(Candidate, Option<HeldOut>)], chosen: usize, best: usize) -> String {
     let name = |i: usize| entries[i].0.method;
     let rmse = |i: usize| entries[i].0.cv_rmse_px.unwrap_or(f64::NAN);
-    let reason = if chosen == best {
-        let simpler: Vec<String> = (0..best)
-            .filter(|&i| entries[i].1.is_some())
-            .map(|i| format!("`{}` {:.4} px", name(i), rmse(i)))
-            .collect();
-        if simpler.is_empty() {
-            format!(
-                "`{}` has the lowest cross-validated error ({:.4} px) and is the simplest candidate",
-                name(best),
-                rmse(best)
-            )
-        } else {
-            format!(
-                "`{}` has the lowest cross-validated error ({:.4} px); every simpler method is worse by more than its noise ({})",
-                name(best),
-                rmse(best),
-                simpler.join(", ")
-            )
-        }
-    } else {
-        format!(
-            "`{}` is within the noise of the lowest cross-validated error ({:.4} px vs {:.4} px for `{}`, noise ±{:.4} px) and is simpler",
-            name(chosen),
-            rmse(chosen),
-            rmse(best),
-            name(best),
-            entries[chosen].0.cv_noise_px.unwrap_or(f64::NAN)
-        )
+    // How much better `i` predicts than `j`, and the noise of that, in per cent.
+    let gain = |i: usize, j: usize| {
+        let (hi, hj) = (entries[i].1.as_ref(), entries[j].1.as_ref());
+        let noise = match (hi, hj) {
+            (Some(a), Some(b)) => paired_noise(a, b) / (2.0 * rmse(j) * rmse(j)),
+            _ => f64::NAN,
+        };
+        (100.0 * (1.0 - rmse(i) / rmse(j)), 100.0 * noise)
     };
-    Some((chosen, reason))
+    if chosen == 0 {
+        if best == 0 {
+            return format!(
+                "the board looks rigid: no board model predicts the left-out photos better than a \
+                 rigid board (`{}`, {:.4} px per corner)",
+                name(0),
+                rmse(0)
+            );
+        }
+        let (g, noise) = gain(best, 0);
+        return format!(
+            "the board looks rigid: modelling {} (`{}`) predicts the left-out photos only {g:.1}% \
+             better than a rigid board, within the noise (±{noise:.1}%), so the simpler `{}` is kept",
+            models(name(best)),
+            name(best),
+            name(0)
+        );
+    }
+    let (g, noise) = gain(chosen, 0);
+    let what = if name(chosen).has_paraboloid() {
+        "the board bends"
+    } else {
+        "the board is not the nominal one"
+    };
+    let mut out = format!(
+        "{what}: modelling {} (`{}`) predicts the left-out photos {g:.1}% better than a rigid \
+         board (`{}`), beyond the noise (±{noise:.1}%)",
+        models(name(chosen)),
+        name(chosen),
+        name(0)
+    );
+    if chosen != best {
+        let (g, noise) = gain(best, chosen);
+        out += &format!(
+            "; `{}` does only {g:.1}% better still, within the noise (±{noise:.1}%), and is more complex",
+            name(best)
+        );
+    }
+    out
 }
 
 /// `bend_order = "auto"`: when the candidates hold several bend orders of one

@@ -131,6 +131,15 @@ impl Default for SolverSettings {
 }
 
 impl SolverSettings {
+    /// The settings a config without `[calibration]` keys gets: the defaults
+    /// with the board priors estimated from the data ([`BoardPriors::estimated`]).
+    pub fn recommended() -> Self {
+        SolverSettings {
+            board: BoardPriors::estimated(),
+            ..SolverSettings::default()
+        }
+    }
+
     /// The weight the loss gives an observation whose weighted residual has norm
     /// `r` pixels: ρ'(r²) of Ceres' Cauchy ρ(s) = a²·ln(1 + s/a²), 1 without a loss.
     /// At a robust optimum these are the weights of the equivalent least squares.

@@ -1,10 +1,15 @@
 //! `method = "auto"`: calibrates every candidate method on all the data and in
 //! k-fold cross-validation over frames, then keeps the method the held-out frames
-//! support (the rule is `model::selection::choose`). The held-out error is the
-//! protocol's test error: each held frame's board pose is refitted with the
-//! trained camera (intrinsics, rig, static correction) held and the board unbent,
-//! so every candidate is judged with the same per-frame freedom.
+//! support (the rule is `model::selection::choose`). Each held frame is refitted
+//! with the trained camera (intrinsics, rig, static correction) held and the
+//! frame's own unknowns free, as the method models them: its pose, and its bend
+//! where the method has one. Judging every candidate on an unbent board (the
+//! protocol's test error) charges a real bend to the method that models it, and
+//! `auto` kept `standard` on bending boards; the bend's extra unknowns are paid
+//! for by scoring each frame per residual degree of freedom, so a rigid board's
+//! frames score alike under every candidate.
 use crate::error::{Error, Result};
+use crate::model::board::{bend_terms, BoardPriors};
 use crate::model::board::{Method, Paraboloid};
 use crate::model::dataset::Dataset;
 use crate::model::lens::Intrinsics;
@@ -15,8 +20,9 @@ use crate::solver::calibrate::{Calibration, Request, SharedWarmStart, MIN_IMAGES
 use crate::solver::problem::{Hold, Loss, Problem, SolverSettings};
 use rayon::prelude::*;
 
-/// Fewest frames per fold: a held-out error from fewer frames is mostly noise.
-const MIN_FRAMES_PER_FOLD: usize = 2;
+/// A held-out frame with fewer observations than this is scored under no
+/// candidate: its refitted bend would have almost no residual left to judge.
+const MIN_SCORED_OBSERVATIONS: usize = 12;
 
 /// The candidates in the order the rule needs: fewest free parameters first.
 fn by_complexity(fits: &[(Method, Result<Calibration>)]) -> Vec<usize> {
@@ -28,24 +34,27 @@ fn by_complexity(fits: &[(Method, Result<Calibration>)]) -> Vec<usize> {
     order
 }
 
-/// Checks `auto`'s settings against the data before any solve.
-pub fn check(dataset: &Dataset, auto: &AutoSettings) -> Result<()> {
+/// Checks `auto`'s settings before any solve (any number of images will do).
+pub fn check(auto: &AutoSettings) -> Result<()> {
     if !auto.candidates.contains(&Method::Standard) {
         return Err(Error::Invalid(
             "method = \"auto\" needs `standard` among its candidates (the baseline)".into(),
         ));
     }
-    let need = auto.folds * MIN_FRAMES_PER_FOLD;
-    if auto.folds < 2 || dataset.num_frames() < need.max(MIN_IMAGES + MIN_FRAMES_PER_FOLD) {
-        return Err(Error::Degenerate(format!(
-            "method = \"auto\" with {}-fold cross-validation needs at least {} images (got {}); \
-             lower calibration.cv_folds or choose a method",
-            auto.folds,
-            need.max(MIN_IMAGES + MIN_FRAMES_PER_FOLD),
-            dataset.num_frames()
+    if auto.folds < 2 {
+        return Err(Error::Invalid(format!(
+            "calibration.cv_folds must be at least 2 (got {})",
+            auto.folds
         )));
     }
     Ok(())
+}
+
+/// Whether `frames` frames are enough to cross-validate: every training set
+/// (all frames but one fold) must be a calibration of its own.
+fn can_cross_validate(frames: usize, auto: &AutoSettings) -> bool {
+    let folds = auto.folds_for(frames);
+    folds >= 2 && frames - frames.div_ceil(folds) >= MIN_IMAGES
 }
 
 /// Calibrates with every candidate (all data) and picks one by cross-validation;
@@ -70,7 +79,10 @@ pub fn calibrate_auto_sharing(
     warm: &SharedWarmStart,
     tick: &(dyn Fn() + Sync),
 ) -> Result<Calibration> {
-    check(dataset, auto)?;
+    check(auto)?;
+    if !can_cross_validate(dataset.num_frames(), auto) {
+        return standard_for_few_frames(dataset, request, auto, warm);
+    }
     let fits: Vec<(Method, Result<Calibration>)> = auto
         .candidates
         .par_iter()
@@ -102,7 +114,11 @@ pub fn calibrate_auto_sharing(
     };
     // Every candidate is cross-validated on the same data: what `standard` kept.
     let cv = &standard.dataset;
-    let folds = selection::folds(cv.num_frames(), auto.folds, auto.seed);
+    if !can_cross_validate(cv.num_frames(), auto) {
+        return standard_for_few_frames(dataset, request, auto, warm);
+    }
+    let k = auto.folds_for(cv.num_frames());
+    let folds = selection::folds(cv.num_frames(), k, auto.seed);
     let held = cross_validate(cv, standard, request, auto, &folds, tick);
     let order = by_complexity(&fits);
     let mut entries: Vec<(Candidate, Option<HeldOut>)> = order
@@ -125,7 +141,7 @@ pub fn calibrate_auto_sharing(
     let (shift, shift_rot) = projection_shift(&standard_intrinsics, &result);
     result.selection = Some(Selection {
         chosen,
-        folds: auto.folds,
+        folds: k,
         seed: auto.seed,
         candidates: entries.into_iter().map(|(c, _)| c).collect(),
         reason,
@@ -133,6 +149,38 @@ pub fn calibrate_auto_sharing(
         projection_shift_rot_px: shift_rot,
     });
     Ok(result)
+}
+
+/// `auto` on a capture too small to cross-validate: `standard`, saying why.
+fn standard_for_few_frames(
+    dataset: &Dataset,
+    request: &Request,
+    auto: &AutoSettings,
+    warm: &SharedWarmStart,
+) -> Result<Calibration> {
+    let mut c = warm.calibrate(
+        dataset,
+        &Request {
+            method: Method::Standard,
+            ..request.clone()
+        },
+    )?;
+    c.detector_noise_px = auto.detector_noise_px;
+    c.selection = Some(Selection {
+        chosen: Method::Standard,
+        folds: 0,
+        seed: auto.seed,
+        candidates: Vec::new(),
+        reason: format!(
+            "{} photos are too few to tell a bending board from a rigid one (leaving one out \
+             needs {} photos), so the board is taken as rigid (`standard`)",
+            c.dataset.num_frames(),
+            MIN_IMAGES + 1
+        ),
+        projection_shift_px: 0.0,
+        projection_shift_rot_px: 0.0,
+    });
+    Ok(c)
 }
 
 /// Largest mapping error between `standard`'s intrinsics and the result's over
@@ -261,7 +309,12 @@ fn fold_error(
     held_out_error(&trained, &cv.subset(held), held, standard, settings)
 }
 
-/// The held frames refitted with the trained camera held: only the poses free.
+/// The held frames refitted with the trained camera held: each frame's pose
+/// free, and its bend where the method has one (no prior on it: the frame's
+/// score pays for its unknowns instead). Each frame's sum of squares is scaled
+/// by 2n / (2n − p) for its 2n residuals and p unknowns, the expectation's
+/// correction, so that every candidate's score estimates the same noise where
+/// the extra unknowns only fit noise.
 fn held_out_error(
     trained: &Calibration,
     test: &Dataset,
@@ -287,13 +340,22 @@ fn held_out_error(
         corrections: trained.state.corrections.clone(),
     };
     let with_correction = trained.method.has_correction();
+    let with_bend = trained.method.has_paraboloid();
+    let method = match (with_correction, with_bend) {
+        (_, true) => trained.method,
+        (true, false) => Method::Static,
+        (false, false) => Method::Standard,
+    };
+    let settings = SolverSettings {
+        board: BoardPriors {
+            geometry: settings.board.geometry.clone(),
+            ..BoardPriors::default()
+        },
+        ..settings
+    };
     let problem = Problem {
         dataset: test,
-        method: if with_correction {
-            Method::Static
-        } else {
-            Method::Standard
-        },
+        method,
         gauge: if with_correction {
             trained.gauge.clone()
         } else {
@@ -304,7 +366,7 @@ fn held_out_error(
             intrinsics: true,
             camera_poses: true,
             corrections: true,
-            deformations: true,
+            deformations: !with_bend,
         },
     };
     let report = problem.solve(&mut state, &settings)?;
@@ -312,6 +374,18 @@ fn held_out_error(
     for (o, r) in test.observations.iter().zip(report.residuals.chunks(2)) {
         out.squared[o.frame] += r[0] * r[0] + r[1] * r[1];
         out.points[o.frame] += 1;
+    }
+    let unknowns = 6 + if with_bend {
+        bend_terms(trained.method.bend_order())
+    } else {
+        0
+    };
+    for (sq, n) in out.squared.iter_mut().zip(out.points.iter_mut()) {
+        if *n < MIN_SCORED_OBSERVATIONS {
+            (*sq, *n) = (0.0, 0);
+        } else {
+            *sq *= (2 * *n) as f64 / (2 * *n - unknowns) as f64;
+        }
     }
     Ok(out)
 }

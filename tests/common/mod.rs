@@ -1,5 +1,6 @@
 //! Shared helpers for the integration tests.
 #![allow(dead_code)]
+pub mod auto_grid;
 use deformcal::model::metrics::mapping_error;
 use deformcal::model::synthetic::{Generator, Preset, Truth};
 use deformcal::solver::problem::Loss;
@@ -234,4 +235,20 @@ pub fn assert_chained_equals_autodiff(
     for (a, b) in chained.residuals.iter().zip(&autodiff.residuals) {
         assert!((a - b).abs() < 1e-9, "{label}: residual {a} vs {b}");
     }
+}
+
+/// Moves `percent` % of the observations by `lo`–`hi` px in a spread of
+/// directions (the same ones every run); returns how many moved.
+pub fn displace(d: &mut Dataset, percent: usize, lo: f64, hi: f64) -> usize {
+    let mut n = 0;
+    for (i, o) in d.observations.iter_mut().enumerate() {
+        if (i * 7919) % 100 < percent {
+            let a = i as f64 * 2.399;
+            let r = lo + (hi - lo) * ((i * 31) % 97) as f64 / 96.0;
+            o.uv[0] += r * a.cos();
+            o.uv[1] += r * a.sin();
+            n += 1;
+        }
+    }
+    n
 }
