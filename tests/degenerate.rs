@@ -207,3 +207,52 @@ fn a_standard_fit_with_more_unknowns_than_residuals_is_refused() {
         "{e}"
     );
 }
+
+/// A tolerance so loose that Ceres stops before its first step was blamed on
+/// `loss_scale_px`; the message now names the tolerances and Ceres' reason.
+#[test]
+fn a_solve_stopped_by_a_tolerance_names_the_tolerance() {
+    let (d, _) = data(Preset::T2, 12, 4, 0.0, 0.0);
+    let r = Request {
+        settings: SolverSettings {
+            gradient_tolerance: 1e30,
+            ..SolverSettings::default()
+        },
+        ..request(Method::Standard)
+    };
+    let e = calibrate(&d, &r).unwrap_err().to_string();
+    assert!(
+        e.contains(
+            "Ceres stopped on a tolerance before its first step (Gradient tolerance reached"
+        ) && e.contains("gradient_tolerance")
+            && !e.contains("loss_scale_px"),
+        "{e}"
+    );
+}
+
+/// A measured board whose corner overflows made Ceres fail with "Residual and
+/// Jacobian evaluation failed", naming no input. (Such a board.json is now
+/// refused when read, tests/bad_inputs/board_json_huge_value.toml; this is the
+/// library given such a board directly.) The message names the likely inputs.
+#[test]
+fn a_failed_evaluation_names_the_likely_input() {
+    let (d, _) = data(Preset::T2, 12, 4, 0.0, 0.0);
+    let mut correction = vec![[0.0; 3]; d.target.num_corners()];
+    correction[17] = [f64::MAX; 3];
+    let geometry = deformcal::model::board::BoardGeometry {
+        target: d.target,
+        correction,
+        correction_std: Vec::new(),
+    };
+    let mut settings = SolverSettings::default();
+    settings.board.geometry = Some(std::sync::Arc::new(geometry));
+    let r = Request {
+        settings,
+        ..request(Method::Standard)
+    };
+    let e = calibrate(&d, &r).unwrap_err().to_string();
+    assert!(
+        e.contains("[target] geometry (board.json)") && e.contains("target.spacing (0.07 m)"),
+        "{e}"
+    );
+}
