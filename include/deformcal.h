@@ -21,7 +21,8 @@
 extern "C" {
 #endif
 
-/* A board of rows x cols inner corners, spacing metres apart (corner i = row*cols + col). */
+/* A board of rows x cols inner corners, spacing metres apart (corner i = row*cols + col);
+ * spacing 0.0001 to 10 m, image sides 1 to 100000 pixels. */
 typedef struct DcTarget {
   uint32_t rows;
   uint32_t cols;
@@ -66,7 +67,8 @@ typedef struct DcOptions {
 #define DC_ERROR_FAILED_CHECKS 4
 
 /* Solver tolerances and the guard rails' RMSE bound for deformcal_calibrate_ex;
- * zero-initialise and set what you need (0 = default; negative or NaN is refused). */
+ * zero-initialise and set what you need (0 = default; a tolerance above 0.1, negative
+ * or NaN is refused). */
 typedef struct DcTolerances {
   double function_tolerance;  /* Ceres: relative change of the cost; 0 = 1e-8 */
   double parameter_tolerance; /* Ceres: relative step size; 0 = 1e-6 */

@@ -26,7 +26,7 @@ fn check(printed: &str) {
         ("scale_huge", "options.loss_scale_px is 1000000000"),
         (
             "tolerance_negative",
-            "tolerances.function_tolerance is -1; use a non-negative number, or 0 for the default",
+            "tolerances.function_tolerance is -1; use a number above 0 and at most 0.1, or 0 for the default",
         ),
         (
             "max_rmse_nan",
@@ -110,4 +110,122 @@ fn bad_calls_through_the_c_api_fail_cleanly_also_under_valgrind() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(0), "valgrind: {stderr}");
     check(&String::from_utf8_lossy(&out.stdout));
+}
+
+/// Calls `deformcal_calibrate_ex` from Rust on a synthetic `t2` set whose
+/// observations `keep` selects, with `method` and the target's spacing and
+/// tolerances as given; returns the code and the message.
+fn calibrate_through_c(
+    keep: impl Fn(&deformcal::Observation) -> bool,
+    method: &str,
+    spacing: Option<f64>,
+    tolerances: deformcal::app::capi::DcTolerances,
+) -> (i32, String) {
+    use deformcal::app::capi::*;
+    use deformcal::model::synthetic::{Generator, Preset};
+    let (d, _) = Generator::new(Preset::T2, Some(30), 3).generate();
+    let target = DcTarget {
+        rows: d.target.rows as u32,
+        cols: d.target.cols as u32,
+        spacing: spacing.unwrap_or(d.target.spacing),
+    };
+    let name = std::ffi::CString::new("cam0").unwrap();
+    let camera = DcCamera {
+        name: name.as_ptr(),
+        width: d.cameras[0].width,
+        height: d.cameras[0].height,
+        model: std::ptr::null(),
+    };
+    let obs: Vec<DcObservation> = d
+        .observations
+        .iter()
+        .filter(|o| keep(o))
+        .map(|o| DcObservation {
+            camera: o.camera as u32,
+            frame: d.frame_ids[o.frame],
+            corner: o.corner as u32,
+            u: o.uv[0],
+            v: o.uv[1],
+        })
+        .collect();
+    let method = std::ffi::CString::new(method).unwrap();
+    let options = DcOptions {
+        method: method.as_ptr(),
+        robust: 0,
+        loss_scale_px: 0.0,
+        threads: 0,
+        max_iterations: 0,
+    };
+    let mut result = DcResult::default();
+    let mut cameras = [DcCameraResult::default()];
+    let mut error = vec![0 as std::ffi::c_char; 1024];
+    let mut count = 0usize;
+    // SAFETY: every pointer is valid for the counts passed.
+    let rc = unsafe {
+        deformcal_calibrate_ex(
+            &target,
+            &camera,
+            1,
+            obs.as_ptr(),
+            obs.len(),
+            &options,
+            &tolerances,
+            &mut result,
+            cameras.as_mut_ptr(),
+            std::ptr::null_mut(),
+            0,
+            &mut count,
+            error.as_mut_ptr(),
+            error.len(),
+        )
+    };
+    // SAFETY: the library NUL-terminates the message within the buffer.
+    let message = unsafe { std::ffi::CStr::from_ptr(error.as_ptr()) }
+        .to_string_lossy()
+        .into_owned();
+    (rc, message)
+}
+
+/// The C API refuses what the library refuses: 30 views of 4 corners leave a
+/// bent view more unknowns than residuals (code 2, the counts in the message);
+/// the whole views calibrate.
+#[test]
+fn the_c_api_refuses_more_unknowns_than_residuals() {
+    let four = |o: &deformcal::Observation| [70, 72, 96, 98].contains(&o.corner);
+    for method in ["dynamic", "full"] {
+        let (rc, message) = calibrate_through_c(four, method, None, Default::default());
+        assert!(
+            rc == 2 && message.contains("8 residuals for its 9 unknowns"),
+            "{method}: rc {rc}: {message}"
+        );
+    }
+    let (rc, message) = calibrate_through_c(|_| true, "dynamic", None, Default::default());
+    assert_eq!(rc, 0, "{message}");
+}
+
+/// The C API bounds what the config bounds: a spacing no board has (which
+/// calibrated with exit 0 and five times the noise's RMSE) and a tolerance at
+/// which Ceres stops before its first step are refused (code 1) with the field.
+#[test]
+fn the_c_api_refuses_implausible_spacing_and_tolerances() {
+    use deformcal::app::capi::DcTolerances;
+    let all = |_: &deformcal::Observation| true;
+    let (rc, message) = calibrate_through_c(all, "standard", Some(1e11), Default::default());
+    assert!(
+        rc == 1
+            && message
+                == "target.spacing must be a length in metres from 0.0001 to 10 (got 1e11); millimetres must be converted",
+        "rc {rc}: {message}"
+    );
+    let loose = DcTolerances {
+        function_tolerance: 1.0,
+        ..Default::default()
+    };
+    let (rc, message) = calibrate_through_c(all, "standard", None, loose);
+    assert!(
+        rc == 1
+            && message
+                == "tolerances.function_tolerance is 1; use a number above 0 and at most 0.1, or 0 for the default",
+        "rc {rc}: {message}"
+    );
 }

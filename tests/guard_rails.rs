@@ -608,3 +608,37 @@ fn opencv_yaml_gives_each_camera_its_own_rmse() {
         );
     }
 }
+
+/// A board spacing no board has (1e11 m) was calibrated with exit 0 and an RMSE
+/// five times the noise's (1.05 px for 0.21): the translations dwarfed every
+/// other parameter. Refused before any work with the key, its line and the
+/// range; the same corners with the board's own spacing calibrate.
+#[test]
+fn an_absurd_board_spacing_is_refused_before_the_solve() {
+    let dir = tempfile::tempdir().unwrap();
+    let (d, _) = Generator::new(Preset::T2, Some(12), 5).generate();
+    write_csv(dir.path(), &d);
+    for (spacing, shown) in [(1e11, "1e11"), (70.0, "70"), (1e-7, "1e-7")] {
+        csv_config(dir.path(), "bad.toml", (13, 13, spacing), "radial3", "");
+        let run = deformcal(&["--config", dir.path().join("bad.toml").to_str().unwrap()]);
+        let last = last_line(&run, 1);
+        assert!(
+            last.contains(
+                "bad.toml: line 4: target.spacing must be a length in metres from 0.0001 to 10"
+            ) && last.contains(&format!("(got {shown})")),
+            "{last}"
+        );
+        assert!(!dir.path().join("out").exists());
+    }
+    csv_config(
+        dir.path(),
+        "good.toml",
+        (13, 13, d.target.spacing),
+        "radial3",
+        "",
+    );
+    ok(&deformcal(&[
+        "--config",
+        dir.path().join("good.toml").to_str().unwrap(),
+    ]));
+}

@@ -4,6 +4,7 @@
 //! as the nominal board of later calibrations. Only this module reads or writes
 //! the file; what a calibration does with the geometry is `model::board`'s
 //! `BoardPriors`.
+use crate::app::config::number;
 use crate::app::fsio::{read_limited, write_atomic};
 use crate::error::{Error, Result};
 use crate::model::board::BoardGeometry;
@@ -128,11 +129,29 @@ pub fn read(path: &Path, target: &Target) -> Result<BoardGeometry> {
             std.len()
         )));
     }
-    let finite = |v: &[[f64; 3]]| v.iter().flatten().all(|x| x.is_finite());
-    if !finite(&b.correction) || !finite(&std) || std.iter().flatten().any(|&s| s < 0.0) {
-        return Err(err(
-            "correction and correction_std must be finite (σ non-negative)".into(),
-        ));
+    // A corner moved by half a square or more would be another corner: such a
+    // value is a broken file, and one near f64::MAX overflows the residuals
+    // ("evaluation failed" with no file named). The same bound holds a σ.
+    let limit = target.spacing / 2.0;
+    for (key, values, lowest) in [
+        ("correction", &b.correction, -limit),
+        ("correction_std", &std, 0.0),
+    ] {
+        if let Some((i, v)) = values
+            .iter()
+            .enumerate()
+            .find(|(_, v)| !v.iter().all(|&x| x >= lowest && x.abs() <= limit))
+        {
+            let shown: Vec<String> = v.iter().map(|&x| number(x)).collect();
+            return Err(err(format!(
+                "{key}[{i}] (corner {i}, row {}, col {}) is [{}] m; each value must be finite{} and at most half the spacing ({} m)",
+                i / target.cols,
+                i % target.cols,
+                shown.join(", "),
+                if lowest == 0.0 { ", non-negative" } else { "" },
+                number(limit)
+            )));
+        }
     }
     Ok(BoardGeometry {
         target: *target,

@@ -2,7 +2,9 @@
 //! observations without files, with per-frame results and the same guard rails as
 //! the command line. Panics and errors become a non-zero return and a message.
 #![allow(unsafe_code)]
-use crate::app::config::{short, LOSS_SCALE_RANGE, MAX_CAMERAS, MAX_CORNERS};
+use crate::app::config::{
+    number, short, LOSS_SCALE_RANGE, MAX_CAMERAS, MAX_CORNERS, MAX_IMAGE_SIDE_PX, MAX_TOLERANCE,
+};
 use crate::app::guard::{self, Rules};
 use crate::model::camera::CameraSpec;
 use crate::model::lens::{LensModel, MAX_PARAMS};
@@ -180,10 +182,10 @@ fn settings_from(o: &DcOptions) -> Result<SolverSettings, String> {
     }
     let (lo, hi) = LOSS_SCALE_RANGE;
     if o.loss_scale_px != 0.0 {
-        if !(o.loss_scale_px >= lo && o.loss_scale_px <= hi) {
+        if !(lo..=hi).contains(&o.loss_scale_px) {
             return Err(format!(
                 "options.loss_scale_px is {}; use {lo} to {hi} pixels, or 0 for 1",
-                o.loss_scale_px
+                number(o.loss_scale_px)
             ));
         }
         settings.loss_scale_px = o.loss_scale_px;
@@ -225,9 +227,11 @@ fn apply_tolerances(t: &DcTolerances, settings: &mut SolverSettings) -> Result<R
             &mut settings.gradient_tolerance,
         ),
     ] {
-        if !(v.is_finite() && v >= 0.0) {
+        // At 1 Ceres stops before its first step (see `config::MAX_TOLERANCE`).
+        if !(0.0..=MAX_TOLERANCE).contains(&v) {
             return Err(format!(
-                "tolerances.{name} is {v}; use a non-negative number, or 0 for the default"
+                "tolerances.{name} is {}; use a number above 0 and at most {MAX_TOLERANCE}, or 0 for the default",
+                number(v)
             ));
         }
         if v > 0.0 {
@@ -237,7 +241,8 @@ fn apply_tolerances(t: &DcTolerances, settings: &mut SolverSettings) -> Result<R
     let m = t.max_rmse_px;
     if !(m.is_finite() && m >= 0.0) {
         return Err(format!(
-            "tolerances.max_rmse_px is {m}; use a positive number of pixels, or 0 for the default rules"
+            "tolerances.max_rmse_px is {}; use a positive number of pixels, or 0 for the default rules",
+            number(m)
         ));
     }
     Ok(Rules {
@@ -275,8 +280,11 @@ unsafe fn slice<'a, T>(p: *const T, n: usize, what: &str) -> Result<&'a [T], Str
 /// `target` is null or points to a `DcTarget`.
 unsafe fn target_from(target: *const DcTarget) -> Result<Target, CError> {
     let t = target.as_ref().ok_or("target is NULL")?;
-    if t.rows < 2 || t.cols < 2 || !(t.spacing.is_finite() && t.spacing > 0.0) {
-        return Err("target: rows and cols must be at least 2 and spacing positive".into());
+    if t.rows < 2 || t.cols < 2 {
+        return Err("target: rows and cols must be at least 2".into());
+    }
+    if let Some(problem) = crate::model::target::spacing_problem(t.spacing) {
+        return Err(format!("target.spacing {problem}").into());
     }
     if (t.rows as usize)
         .checked_mul(t.cols as usize)
@@ -328,8 +336,16 @@ unsafe fn camera_specs(
             })
         })
         .collect::<Result<Vec<_>, CError>>()?;
-    if specs.iter().any(|c| c.width == 0 || c.height == 0) {
-        return Err("camera width and height must be positive".into());
+    if let Some((k, c)) = specs.iter().enumerate().find(|(_, c)| {
+        [c.width, c.height]
+            .iter()
+            .any(|&v| v == 0 || v > MAX_IMAGE_SIDE_PX)
+    }) {
+        return Err(format!(
+            "cameras[{k}]: width and height must be 1 to {MAX_IMAGE_SIDE_PX} pixels (got {} × {})",
+            c.width, c.height
+        )
+        .into());
     }
     for (k, c) in specs.iter().enumerate() {
         if let Some(j) = specs[..k].iter().position(|o| o.name == c.name) {

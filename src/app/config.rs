@@ -644,6 +644,34 @@ pub const LOSS_SCALE_RANGE: (f64, f64) = (1e-3, 1e4);
 pub const OUTLIER_K_RANGE: (f64, f64) = (2.0, 100.0);
 /// Most folds `auto` cross-validates with (each fold is a full calibration per candidate).
 pub const MAX_CV_FOLDS: usize = 20;
+/// Largest solver tolerance (function, gradient, parameter): a relative change
+/// of more than a tenth is no convergence, and at 1 Ceres stops before its first
+/// step, which then looks like a flat cost.
+pub const MAX_TOLERANCE: f64 = 0.1;
+/// Largest image side, pixels (a 100-megapixel sensor is about 12 000 wide).
+pub const MAX_IMAGE_SIDE_PX: u32 = 100_000;
+/// The range of `detector_noise_px`: a corner detector is neither exact to a
+/// ten-thousandth of a pixel nor off by a hundred.
+pub const NOISE_RANGE_PX: (f64, f64) = (1e-4, 100.0);
+/// The range of the board priors' σ and of `max_bend_mm`, millimetres: from a
+/// tenth of a micrometre (the priors' weight noise/σ grows beyond what the solve
+/// can balance) to 10 m (no constraint at all).
+pub const BOARD_MM_RANGE: (f64, f64) = (1e-4, 1e4);
+/// The range of `lens_prior`'s σ (a distortion coefficient's): below it the
+/// prior holds the coefficients at zero as `fix` would, with a badly scaled
+/// weight; above it the prior does nothing.
+pub const LENS_PRIOR_RANGE: (f64, f64) = (1e-6, 1e3);
+
+/// A number for a message: plain where that is short, else in exponent form
+/// (1e-300 is written so, not with 300 zeros).
+pub fn number(v: f64) -> String {
+    let a = v.abs();
+    if v == 0.0 || !v.is_finite() || (1e-5..1e12).contains(&a) {
+        format!("{v}")
+    } else {
+        format!("{v:e}")
+    }
+}
 
 /// A value cut to a readable length for a message.
 pub fn short(s: &str) -> String {
@@ -702,7 +730,7 @@ impl Checker<'_> {
         if !(c.loss_scale_px.is_finite() && c.loss_scale_px >= lo && c.loss_scale_px <= hi) {
             return Err(self.err(format!(
                 "calibration.loss_scale_px must be {lo} to {hi} pixels (got {})",
-                c.loss_scale_px
+                number(c.loss_scale_px)
             )));
         }
         if c.max_iterations == 0 {
@@ -712,7 +740,7 @@ impl Checker<'_> {
         if !(c.outlier_k == 0.0 || (c.outlier_k >= klo && c.outlier_k <= khi)) {
             return Err(self.err(format!(
                 "calibration.outlier_k must be 0 (off) or {klo} to {khi} (got {})",
-                c.outlier_k
+                number(c.outlier_k)
             )));
         }
         self.check_auto(c)?;
@@ -781,8 +809,10 @@ impl Checker<'_> {
         Ok(())
     }
 
-    /// The board priors' σ: positive millimetres.
+    /// The board priors' σ and `max_bend_mm`: millimetres in [`BOARD_MM_RANGE`];
+    /// the lens prior's σ in [`LENS_PRIOR_RANGE`].
     fn check_board_priors(&self, c: &CalibrationConfig) -> Result<()> {
+        let (lo, hi) = BOARD_MM_RANGE;
         for (key, v) in [
             (
                 "static_prior_mm",
@@ -796,11 +826,21 @@ impl Checker<'_> {
             ("max_bend_mm", Some(c.max_bend_mm)),
         ] {
             if let Some(v) = v {
-                if !(v.is_finite() && v > 0.0) {
+                if !(lo..=hi).contains(&v) {
                     return Err(self.err(format!(
-                        "calibration.{key} must be a positive number of millimetres (got {v})"
+                        "calibration.{key} must be a positive number of millimetres, {lo} to {hi} (got {})",
+                        number(v)
                     )));
                 }
+            }
+        }
+        let (lo, hi) = LENS_PRIOR_RANGE;
+        if let Some(v) = c.lens_prior.0 {
+            if !(lo..=hi).contains(&v) {
+                return Err(self.err(format!(
+                    "calibration.lens_prior must be {lo} to {hi}, or \"none\" (got {})",
+                    number(v)
+                )));
             }
         }
         Ok(())
@@ -964,11 +1004,8 @@ impl Checker<'_> {
                 t.rows, t.cols
             )));
         }
-        if !(t.spacing.is_finite() && t.spacing > 0.0) {
-            return Err(self.err(format!(
-                "{table}.spacing must be a positive length in metres (got {})",
-                t.spacing
-            )));
+        if let Some(problem) = crate::model::target::spacing_problem(t.spacing) {
+            return Err(self.err(format!("{table}.spacing {problem}")));
         }
         Ok(())
     }
@@ -1106,12 +1143,13 @@ impl Checker<'_> {
     /// Each camera's image size is positive and its fixed parameters are its model's.
     fn check_camera_params(&self, cameras: &[CameraSpec]) -> Result<()> {
         for (k, c) in cameras.iter().enumerate() {
-            if c.width == 0 || c.height == 0 {
-                let key = if c.width == 0 { "width" } else { "height" };
-                return Err(self.err(format!(
-                    "cameras[{k}].{key} of `{}` must be positive",
-                    c.name
-                )));
+            for (key, v) in [("width", c.width), ("height", c.height)] {
+                if v == 0 || v > MAX_IMAGE_SIDE_PX {
+                    return Err(self.err(format!(
+                        "cameras[{k}].{key} of `{}` must be positive, at most {MAX_IMAGE_SIDE_PX} pixels (got {v})",
+                        c.name
+                    )));
+                }
             }
             if let Some(name) = c.unknown_fixed() {
                 return Err(self.err(format!(
@@ -1156,17 +1194,20 @@ impl Checker<'_> {
 
     /// `[calibration]` threads and tolerances within what Ceres accepts.
     fn check_solver_limits(&self, c: &CalibrationConfig) -> Result<()> {
+        let (lo, hi) = NOISE_RANGE_PX;
         if let Some(n) = c.detector_noise_px {
-            if !(n.is_finite() && n > 0.0 && n <= 100.0) {
+            if !(lo..=hi).contains(&n) {
                 return Err(self.err(format!(
-                    "calibration.detector_noise_px must be a positive number of pixels, at most 100 (got {n})"
+                    "calibration.detector_noise_px must be a positive number of pixels, {lo} to {hi} (got {})",
+                    number(n)
                 )));
             }
         }
         if let Some(m) = c.max_rmse_px {
             if !(m.is_finite() && m > 0.0) {
                 return Err(self.err(format!(
-                    "calibration.max_rmse_px must be a positive number of pixels (got {m})"
+                    "calibration.max_rmse_px must be a positive number of pixels (got {})",
+                    number(m)
                 )));
             }
         }
@@ -1181,9 +1222,10 @@ impl Checker<'_> {
             ("gradient_tolerance", c.gradient_tolerance),
             ("parameter_tolerance", c.parameter_tolerance),
         ] {
-            if !(v.is_finite() && v >= 0.0) {
+            if !(v > 0.0 && v <= MAX_TOLERANCE) {
                 return Err(self.err(format!(
-                    "calibration.{key} must be a non-negative number (got {v})"
+                    "calibration.{key} must be above 0 and at most {MAX_TOLERANCE} (got {}): it is the relative change at which the solve stops",
+                    number(v)
                 )));
             }
         }

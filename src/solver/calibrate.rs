@@ -704,6 +704,7 @@ fn solve_method(
             frozen.len()
         ));
     }
+    crate::solver::identifiable::check(dataset, request.method, &request.settings, &frozen)?;
     let problem = method_problem(dataset, request.method, &gauge, &frozen);
     // The first solve of a method without per-corner corrections starts from
     // unbent boards (see `WarmUp::FRESH_BENDS`).
@@ -941,6 +942,7 @@ fn warm_start(input: &Dataset, request: &Request) -> Result<WarmStart> {
     let dataset = robust::drop_inconsistent_views(&dataset, &mut warnings)?;
     let (dataset, mut state, init_fallback) = initialise(&dataset, &mut warnings)?;
     coverage_warnings(&dataset, &mut warnings);
+    crate::solver::identifiable::check(&dataset, Method::Standard, &request.settings, &[])?;
     let initial_intrinsics = state.intrinsics.clone();
 
     let mut stages = Vec::new();

@@ -6,6 +6,7 @@ mod bridge;
 pub mod calibrate;
 pub mod covariance;
 pub mod health;
+pub mod identifiable;
 pub mod problem;
 mod repose;
 pub mod residuals;

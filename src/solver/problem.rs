@@ -469,14 +469,42 @@ impl Problem<'_> {
     ) -> Result<SolveReport> {
         let layout = self.layout();
         let mut data = self.data(state, &layout, settings)?;
-        let mut report = solver(&mut data, &settings.options())
-            .map_err(|e| Error::Problem(e.what().to_string()))?;
+        let mut report = solver(&mut data, &settings.options()).map_err(|e| {
+            Error::Problem(format!(
+                "{}{}",
+                e.what(),
+                self.likely_input(e.what(), settings)
+            ))
+        })?;
         if !report.usable {
-            return Err(Error::Solver(format!("{what} failed: {}", report.message)));
+            return Err(Error::Solver(format!(
+                "{what} failed: {}{}",
+                report.message,
+                self.likely_input(&report.message, settings)
+            )));
         }
         self.unweight(&mut report.residuals);
         layout.unpack(&data.params, state);
         Ok(report)
+    }
+
+    /// Where a solve that could not evaluate its residuals most likely got the
+    /// values that broke them (appended to Ceres' message, which names no
+    /// input): a measured board first, as it is the only input read whole
+    /// into the board points. Empty for other failures.
+    fn likely_input(&self, message: &str, settings: &SolverSettings) -> String {
+        if !message.contains("evaluation failed") && !message.contains("could not be evaluated") {
+            return String::new();
+        }
+        let board = if settings.board.geometry.is_some() {
+            "the measured board of [target] geometry (board.json), "
+        } else {
+            ""
+        };
+        format!(
+            "; a residual was not finite: check {board}target.spacing ({} m) and the observations' pixels",
+            self.dataset.target.spacing
+        )
     }
 
     /// Residuals in pixels (observed − projected, per observation u then v, weights

@@ -185,9 +185,19 @@ pub fn check_stage(method: Method, report: &SolveReport, fresh: bool) -> Result<
         )));
     }
     if report.iterations <= 0 && (fresh || start > POOR_START_PX) {
+        // Ceres says which test stopped it: a tolerance met before the first
+        // step is the tolerance's fault, not the loss's.
+        let cause = if report.message.contains("tolerance") {
+            format!(
+                "Ceres stopped on a tolerance before its first step ({}); \
+                 check calibration.function_tolerance, gradient_tolerance and parameter_tolerance",
+                report.message.trim_end_matches('.')
+            )
+        } else {
+            "the cost is flat or underflows; check loss_scale_px and the observation weights".into()
+        };
         return Err(Error::Solver(format!(
-            "the {method} solve made no progress from its start (RMSE {start:.3} px after 0 iterations): \
-             the cost is flat or underflows; check loss_scale_px and the observation weights"
+            "the {method} solve made no progress from its start (RMSE {start:.3} px after 0 iterations): {cause}"
         )));
     }
     Ok(())
