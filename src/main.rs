@@ -274,15 +274,17 @@ fn run_calibrate(args: CalibrateArgs) -> Result<()> {
     // Judged as the method that ran (with `auto`, the one chosen).
     let request = request_of(&config, result.method);
     result.detector_noise_px = config.calibration.detector_noise_px;
-    // The summary's own warnings go to stdout; these go to stderr, and all to the JSON.
-    let own = result.warnings.len();
-    let mut warnings = loaded.warnings.clone();
-    warnings.extend(lint::flipped_frames(&result, &loaded.files));
-    result.warnings.extend(warnings.iter().cloned());
+    // Every warning goes to stderr (the summary on stdout has none), and all to the JSON.
+    let mut warnings = result.warnings.clone();
+    warnings.extend(loaded.warnings.iter().cloned());
+    let lints = lint::flipped_frames(&result, &loaded.files);
+    warnings.extend(lints.iter().cloned());
+    result.warnings.extend(loaded.warnings.iter().cloned());
+    result.warnings.extend(lints);
     // The summary is made while the files are written (on another core).
     let staging = set.path();
     let (summary, written) = rayon::join(
-        || report::summary_with(&result, &result.warnings[..own]),
+        || report::summary_with(&result, &[]),
         || -> Result<_> {
             let failure = guard::judge(&loaded.dataset, &request, &result, rules, &loaded.files);
             let written = match &failure {

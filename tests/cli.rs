@@ -255,3 +255,50 @@ fn bad_flags_are_refused() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--config"));
 }
+
+#[test]
+fn warnings_go_to_stderr_and_results_to_stdout() {
+    let case = Case::new();
+    good_csv(&case);
+    let text = std::fs::read_to_string(case.path("obs.csv")).unwrap();
+    // One corner moved far outside the image: dropped with a warning.
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let fields: Vec<&str> = lines[5].split(',').collect();
+    lines[5] = format!(
+        "{},{},{},7160,{}",
+        fields[0], fields[1], fields[2], fields[4]
+    );
+    case.write("obs.csv", &(lines.join("\n") + "\n"));
+    let out = deformcal(&["--config", case.config("").to_str().unwrap()]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stdout.contains("RMSE"), "{stdout}");
+    assert!(!stdout.contains("warning"), "{stdout}");
+    assert!(
+        stderr
+            .lines()
+            .any(|l| l.starts_with("warning: 1 observation(s) outside the image dropped")),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn too_few_usable_images_say_why_the_others_were_dropped() {
+    let case = Case::new();
+    // Three frames whose corners all lie at one pixel: no homography, no view.
+    let mut text = String::from("camera,frame,corner,u,v\n");
+    for frame in 0..3 {
+        for corner in 0..169 {
+            text += &format!("cam0,{frame},{corner},500,{}\n", 400 + frame);
+        }
+    }
+    case.write("obs.csv", &text);
+    let e = case.fails(&case.config(""));
+    assert!(
+        e.contains("0 usable image(s)")
+            && e.contains("frame 0 skipped: its corners are collinear or degenerate")
+            && e.contains("frame 2 skipped"),
+        "{e}"
+    );
+}

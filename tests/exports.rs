@@ -6,8 +6,9 @@
 mod common;
 use common::{python_has, run_tool};
 use deformcal::app::calibration_json::{CalibrationJson, CameraJson};
+use deformcal::app::exports::OptimizationInputs;
 use deformcal::app::output::calibration_files;
-use deformcal::app::output::{write_calibration, Written};
+use deformcal::app::output::{write_calibration, write_models, Written};
 use deformcal::model::synthetic::{Generator, Preset};
 use deformcal::solver::problem::SolverSettings;
 use deformcal::{calibrate, LensModel, Method, Pose, Request};
@@ -376,4 +377,76 @@ fn the_new_files_belong_to_a_calibration() {
         assert!(owns(name), "{name}");
     }
     assert!(!owns("notes.txt"));
+}
+
+/// A name that, written raw into a comment line, would add a Kalibr camera, a
+/// COLMAP camera and an mrcal key of its own with fx = 1000.
+const INJECTED: &str = "evil\ncam7:\n  intrinsics: [1000.0, 1000.0, 5.0, 5.0]\n7 PINHOLE 10 10 1000 1000 5 5\n    'intrinsics': [ 1000.0 ],";
+
+/// The lines of `text` that are not comments.
+fn data_lines(text: &str) -> Vec<&str> {
+    text.lines()
+        .filter(|l| !l.trim_start().starts_with('#'))
+        .collect()
+}
+
+#[test]
+fn a_name_with_newlines_from_calibration_json_stays_in_its_comment() {
+    let (_dir, mut json, _) = calibrated(Preset::Stereo, &[LensModel::OpenCv5; 2], true);
+    json.cameras[0].name = INJECTED.into();
+    let out = tempfile::tempdir().unwrap();
+    let inputs = OptimizationInputs::Absent(format!("camera `{INJECTED}` has no inputs"));
+    let written = write_models(out.path(), &json, &inputs).unwrap();
+    let chain = std::fs::read_to_string(out.path().join("camchain.yaml")).unwrap();
+    let keys: Vec<&str> = data_lines(&chain)
+        .into_iter()
+        .filter(|l| !l.starts_with(' '))
+        .collect();
+    assert_eq!(keys, ["cam0:", "cam1:"], "{chain}");
+    let colmap = std::fs::read_to_string(out.path().join("cameras.txt")).unwrap();
+    let ids: Vec<&str> = data_lines(&colmap)
+        .iter()
+        .map(|l| l.split(' ').next().unwrap())
+        .collect();
+    assert_eq!(ids, ["1", "2"], "{colmap}");
+    let model_files: Vec<_> = std::fs::read_dir(out.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().to_string())
+        .filter(|n| n.ends_with(".cameramodel"))
+        .collect();
+    assert_eq!(model_files.len(), 2, "{model_files:?}");
+    for f in &model_files {
+        assert!(!f.contains('\n'), "{f:?}");
+        let text = std::fs::read_to_string(out.path().join(f)).unwrap();
+        let intrinsics = data_lines(&text)
+            .iter()
+            .filter(|l| l.contains("'intrinsics'"))
+            .count();
+        assert_eq!(intrinsics, 1, "{text}");
+    }
+    for w in &written.warnings {
+        assert!(!w.contains('\n'), "{w:?}");
+    }
+}
+
+#[test]
+fn names_that_become_one_key_are_refused_at_export() {
+    let (_dir, mut json, _) = calibrated(Preset::Stereo, &[LensModel::OpenCv5; 2], false);
+    for (pair, what) in [
+        (["a b", "a_b"], "opencv.yaml key prefix `a_b_`"),
+        (["0", "cam_0"], "opencv.yaml key prefix `cam_0_`"),
+        (["Left", "left"], "the file `left.cameramodel`"),
+    ] {
+        json.cameras[0].name = pair[0].into();
+        json.cameras[1].name = pair[1].into();
+        let out = tempfile::tempdir().unwrap();
+        let inputs = OptimizationInputs::Absent("test".into());
+        let e = write_models(out.path(), &json, &inputs).unwrap_err();
+        let message = e.to_string();
+        assert!(
+            message.contains(&format!("`{}` and `{}`", pair[0], pair[1])) && message.contains(what),
+            "{message}"
+        );
+        assert_eq!(std::fs::read_dir(out.path()).unwrap().count(), 0);
+    }
 }

@@ -218,3 +218,87 @@ fn a_photo_of_another_size_is_rejected() {
     );
     assert!(!dir.path().join("out").exists());
 }
+
+/// Three files that are not images: detection rejects each, so the error says how
+/// many files the pattern listed without rendering photos.
+fn write_non_images(dir: &Path) {
+    std::fs::create_dir_all(dir).unwrap();
+    for f in ["a.png", "b.png", "c.png"] {
+        std::fs::write(dir.join(f), b"not a picture").unwrap();
+    }
+}
+
+/// Runs deformcal in `dir` on the config `c.toml` given by its bare name.
+fn run_in(dir: &Path, config: &str) -> String {
+    std::fs::write(dir.join("c.toml"), config).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_deformcal"))
+        .args(["--config", "c.toml"])
+        .current_dir(dir)
+        .output()
+        .expect("run deformcal");
+    assert!(!out.status.success());
+    String::from_utf8_lossy(&out.stderr).to_string()
+}
+
+const CAM0: &str = "[[cameras]]\nname = \"cam0\"\nwidth = 640\nheight = 480\n";
+
+#[test]
+fn patterns_without_a_folder_start_in_the_configs_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    write_non_images(&dir.path().join("photos"));
+    for pattern in ["**/*.png", "photos/*.png", "*/*.png"] {
+        let stderr = run_in(
+            dir.path(),
+            &format!("{BOARD}{CAM0}[data]\nphotos = \"{pattern}\"\n"),
+        );
+        assert!(
+            stderr.contains(&format!("photos `{pattern}`")) && stderr.contains("in 0 of 3 images"),
+            "{pattern}: {stderr}"
+        );
+    }
+}
+
+#[cfg(unix)]
+#[test]
+fn a_link_loop_lists_each_photo_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let photos = dir.path().join("photos");
+    write_non_images(&photos);
+    std::os::unix::fs::symlink(".", photos.join("loop")).unwrap();
+    std::os::unix::fs::symlink("..", photos.join("up")).unwrap();
+    let stderr = run_in(
+        dir.path(),
+        &format!("{BOARD}{CAM0}[data]\nphotos = \"photos/**/*.png\"\n"),
+    );
+    assert!(stderr.contains("in 0 of 3 images"), "{stderr}");
+}
+
+#[cfg(unix)]
+#[test]
+fn one_photo_reached_by_two_names_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    write_non_images(&dir.path().join("photos/real"));
+    std::os::unix::fs::symlink("real", dir.path().join("photos/alias")).unwrap();
+    let stderr = run_in(
+        dir.path(),
+        &format!("{BOARD}{CAM0}[data]\nphotos = \"photos/*/*.png\"\n"),
+    );
+    assert!(
+        stderr.starts_with("error: photos `photos/*/*.png`: `photos/alias/a.png` and `photos/real/a.png` are the same file"),
+        "{stderr}"
+    );
+    assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
+    // The same photos for two cameras: a rig with no baseline.
+    let stderr = run_in(
+        dir.path(),
+        &format!(
+            "{BOARD}{CAM0}[[cameras]]\nname = \"cam1\"\nwidth = 640\nheight = 480\n\
+             [data]\nphotos = {{ cam0 = \"photos/real/*.png\", cam1 = \"photos/real/*.png\" }}\n"
+        ),
+    );
+    assert!(
+        stderr.contains("`photos/real/a.png` is matched by the patterns of both camera `cam0` and camera `cam1`"),
+        "{stderr}"
+    );
+    assert!(!dir.path().join("out").exists());
+}

@@ -635,8 +635,8 @@ pub const MAX_SUBSETS: usize = 100_000;
 pub const MAX_CORNERS: usize = 1_000_000;
 /// Most cameras a config may list.
 pub const MAX_CAMERAS: usize = 64;
-/// Longest camera name, in bytes: `<name>.cameramodel` must fit a file name.
-pub const MAX_NAME_BYTES: usize = 200;
+/// Longest camera name, in bytes (names are ASCII, see [`camera_name_error`]).
+pub const MAX_NAME_BYTES: usize = 64;
 /// The range of `loss_scale_px`: beyond it the Cauchy cost underflows or the
 /// loss does nothing, and the solver stops at its start.
 pub const LOSS_SCALE_RANGE: (f64, f64) = (1e-3, 1e4);
@@ -682,9 +682,29 @@ pub fn short(s: &str) -> String {
     }
 }
 
+/// Why `name` is not a camera name, if it is not: ASCII letters, digits, `_`, `-`,
+/// `.` and space, starting with a letter or digit (docs/conventions.md, Camera
+/// names). Names become file names, YAML keys and comment lines in the exports,
+/// where a `/`, a newline or a `#` would change what another tool reads.
+pub fn camera_name_error(name: &str) -> Option<String> {
+    if let Some(bad) = name
+        .chars()
+        .find(|&c| !(c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.' | ' ')))
+    {
+        return Some(format!(
+            "contains {}; a camera name may have letters, digits, `_`, `-`, `.` and spaces",
+            bad.escape_default()
+        ));
+    }
+    if !name.starts_with(|c: char| c.is_ascii_alphanumeric()) {
+        return Some("must start with a letter or a digit".into());
+    }
+    None
+}
+
 impl Checker<'_> {
-    /// Names: present, short enough for a file name, distinct, and distinct as
-    /// file names too (`a/b` and `a_b` would both write `a_b.cameramodel`).
+    /// Names: present, short, of the safe characters, distinct, and distinct in
+    /// every export too (`a b` and `a_b` would both be opencv.yaml's `a_b_`).
     fn check_camera_names(&self, cameras: &[CameraSpec]) -> Result<()> {
         if cameras.len() > MAX_CAMERAS {
             return Err(self.err(format!(
@@ -693,7 +713,6 @@ impl Checker<'_> {
             )));
         }
         let mut names: BTreeMap<&str, usize> = BTreeMap::new();
-        let mut files: BTreeMap<String, usize> = BTreeMap::new();
         for (k, c) in cameras.iter().enumerate() {
             if c.name.trim().is_empty() {
                 return Err(self.err(format!("cameras[{k}].name must not be empty")));
@@ -705,21 +724,24 @@ impl Checker<'_> {
                     c.name.len()
                 )));
             }
+            if let Some(why) = camera_name_error(&c.name) {
+                return Err(self.err(format!(
+                    "cameras[{k}].name `{}` {why}",
+                    crate::app::exports::printable(&short(&c.name))
+                )));
+            }
             if names.insert(&c.name, k).is_some() {
                 return Err(self.err(format!(
                     "cameras[{k}].name `{}` is used twice",
                     short(&c.name)
                 )));
             }
-            let file = crate::app::exports::model_file_name(&c.name);
-            if let Some(other) = files.insert(file.clone(), k) {
-                return Err(self.err(format!(
-                    "cameras[{k}].name `{}` and `{}` would both be written as `{}`; rename one",
-                    short(&c.name),
-                    short(&cameras[other].name),
-                    short(&file)
-                )));
-            }
+        }
+        if let Some(c) = crate::app::exports::name_clash(cameras.iter().map(|c| c.name.as_str())) {
+            return Err(self.err(format!(
+                "cameras[{}].name `{}` and `{}` would both be written as {}; rename one",
+                c.second, cameras[c.second].name, cameras[c.first].name, c.what
+            )));
         }
         Ok(())
     }

@@ -47,23 +47,28 @@ fn captures(re: &regex::Regex, name: &str) -> Option<String> {
     Some(caps.iter().skip(1).flatten().map(|m| m.as_str()).collect())
 }
 
-/// The camera and time-step key of an image file: with patterns, the first camera
-/// whose pattern matches (against the base name unless the pattern has a `/`) and
-/// what its wildcards matched; without, camera 0 and the whole name.
-fn camera_of(
+/// The cameras whose patterns match an image file (against the base name unless
+/// the pattern has a `/`), each with what its wildcards matched, the time-step
+/// key; without patterns, camera 0 and the whole name. More than one is an
+/// ambiguity the caller refuses: the image would be a view of whichever came first.
+fn cameras_of(
     file: &str,
     cameras: &[CameraSpec],
     patterns: &[Option<(regex::Regex, bool)>],
-) -> Option<(usize, String)> {
+) -> Vec<(usize, String)> {
     if patterns.is_empty() {
-        return Some((0, file.to_string()));
+        return vec![(0, file.to_string())];
     }
     let base = file.rsplit('/').next().unwrap_or(file);
-    cameras.iter().enumerate().find_map(|(k, _)| {
-        let (re, whole_path) = patterns[k].as_ref()?;
-        let subject = if *whole_path { file } else { base };
-        captures(re, subject).map(|key| (k, key))
-    })
+    cameras
+        .iter()
+        .enumerate()
+        .filter_map(|(k, _)| {
+            let (re, whole_path) = patterns[k].as_ref()?;
+            let subject = if *whole_path { file } else { base };
+            captures(re, subject).map(|key| (k, key))
+        })
+        .collect()
 }
 
 /// Each camera's compiled pattern (with whether it matches the whole path), in
@@ -104,6 +109,9 @@ struct Corner {
     line: u64,
     xy: Option<[f64; 2]>,
     weight: f64,
+    /// Marked not found by a negative weight (mrcal's convention), though it has
+    /// coordinates: said in the error when no corner is left.
+    negative_weight: bool,
 }
 
 /// A data error at `line` of the table at `path`.
@@ -225,6 +233,7 @@ fn parse_row(path: &Path, line: u64, trimmed: &str, cols: &Columns) -> Result<(S
     let y = number(path, line, fields[cols.y], "y")?;
     let mut weight = 1.0;
     let mut present = x.is_some() && y.is_some();
+    let mut negative_weight = false;
     if let Some(c) = cols.level.filter(|&c| c < fields.len()) {
         match number(path, line, fields[c], "level")? {
             // mrgingham: noise doubles with each decimation level.
@@ -238,7 +247,18 @@ fn parse_row(path: &Path, line: u64, trimmed: &str, cols: &Columns) -> Result<(S
         match number(path, line, fields[c], "weight")? {
             Some(w) if (lo..=hi).contains(&w) => weight = w,
             Some(w) if w > 0.0 => return Err(err(format!("weight {w} is outside {lo}..{hi}"))),
-            _ => present = false,
+            // mrcal reads a negative weight as "corner not found"; 0 is neither a
+            // weight the solver can use nor that mark, so it is a mistake.
+            Some(w) if w < 0.0 => {
+                negative_weight = present;
+                present = false;
+            }
+            Some(_) => {
+                return Err(err(format!(
+                    "weight 0 is not a usable weight (use {lo}..{hi}, or `-` or a negative weight for a corner not found)"
+                )))
+            }
+            None => present = false,
         }
     }
     let corner = Corner {
@@ -249,6 +269,7 @@ fn parse_row(path: &Path, line: u64, trimmed: &str, cols: &Columns) -> Result<(S
             None
         },
         weight,
+        negative_weight,
     };
     Ok((fields[cols.file].to_string(), corner))
 }
@@ -324,11 +345,20 @@ fn key_images(
                 target.cols
             )));
         }
-        let (camera, key) = camera_of(&file, cameras, &compiled).ok_or_else(|| {
-            err(format!(
-                "`{file}` matches no pattern of data.camera_patterns"
-            ))
-        })?;
+        let (camera, key) = match cameras_of(&file, cameras, &compiled).as_slice() {
+            [] => {
+                return Err(err(format!(
+                    "`{file}` matches no pattern of data.camera_patterns"
+                )))
+            }
+            [one] => one.clone(),
+            [a, b, ..] => {
+                return Err(err(format!(
+                    "`{file}` matches the data.camera_patterns of both `{}` and `{}`; an image belongs to one camera",
+                    cameras[a.0].name, cameras[b.0].name
+                )))
+            }
+        };
         if !keys_seen.insert((camera, key.clone())) {
             return Err(err(format!(
                 "`{file}` is a second image of camera {} at time step `{key}`",
@@ -367,6 +397,22 @@ fn assemble(
         }
     }
     if rows.is_empty() {
+        let negative: Vec<u64> = keyed
+            .iter()
+            .flat_map(|(_, _, corners, _)| corners)
+            .filter(|c| c.negative_weight)
+            .map(|c| c.line)
+            .collect();
+        if let Some(&first) = negative.first() {
+            return Err(data_err(
+                path,
+                first,
+                format!(
+                    "no corner is left: all {} corners with coordinates have a negative weight, which mrcal's corners.vnl uses to mark a corner not found",
+                    negative.len()
+                ),
+            ));
+        }
         return Err(data_err(path, 1, "no corner was found in any image".into()));
     }
     let mut dataset = Dataset::from_keyed(target, cameras, rows);

@@ -189,21 +189,19 @@ pub fn write_models(
     })
 }
 
-/// Refuses cameras whose model files would have the same name.
+/// Refuses cameras whose names would collide in an export (a file or a key): a
+/// calibration.json given to `export` is not checked by the config.
 fn check_model_files<'a>(names: impl Iterator<Item = &'a str>) -> Result<()> {
-    let mut files = std::collections::BTreeMap::new();
-    for name in names {
-        let file = exports::model_file_name(name);
-        if let Some(other) = files.insert(file.clone(), name) {
-            return Err(Error::Invalid(format!(
-                "cameras `{}` and `{}` would both be written as `{}`; rename one",
-                crate::app::config::short(other),
-                crate::app::config::short(name),
-                crate::app::config::short(&file)
-            )));
-        }
+    let names: Vec<&str> = names.collect();
+    match exports::name_clash(names.iter().copied()) {
+        None => Ok(()),
+        Some(c) => Err(Error::Invalid(format!(
+            "cameras `{}` and `{}` would both be written as {}; rename one",
+            exports::printable(&crate::app::config::short(names[c.first])),
+            exports::printable(&crate::app::config::short(names[c.second])),
+            c.what
+        ))),
     }
-    Ok(())
 }
 
 /// What a calibration wrote.

@@ -11,8 +11,8 @@ pub fn summary(c: &Calibration) -> String {
 }
 
 /// [`summary`] with `warnings` in place of the calibration's own: the command line
-/// prints those it had before the input's were added, while the result files,
-/// written meanwhile from the same calibration, carry all of them.
+/// passes none, because it prints every warning on stderr (stdout holds results),
+/// while the HTML report's summary carries them all.
 pub fn summary_with(c: &Calibration, warnings: &[String]) -> String {
     let mut s = String::new();
     let d = &c.dataset;

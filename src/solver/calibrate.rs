@@ -339,6 +339,34 @@ fn own_views(
     Ok(own)
 }
 
+/// What was dropped before too few images were left, for the error that says so:
+/// the warnings so far are the drops (outside the image, inconsistent or
+/// degenerate views), and the error is all the user sees of a failed run. The
+/// first few, cut short, and a count of the rest.
+fn dropped_reasons(warnings: &[String]) -> String {
+    // Kept short so the whole error stays one readable line.
+    const SHOWN: usize = 4;
+    const CHARS: usize = 80;
+    if warnings.is_empty() {
+        return String::new();
+    }
+    let mut list: Vec<String> = warnings
+        .iter()
+        .take(SHOWN)
+        .map(|w| {
+            if w.chars().count() > CHARS {
+                format!("{}…", w.chars().take(CHARS).collect::<String>())
+            } else {
+                w.clone()
+            }
+        })
+        .collect();
+    if warnings.len() > SHOWN {
+        list.push(format!("{} more", warnings.len() - SHOWN));
+    }
+    format!(" (dropped: {})", list.join("; "))
+}
+
 /// A camera's initial intrinsics, board pose per frame, and whether Zhang fell back.
 type CameraInit = (Intrinsics, Vec<Option<Pose>>, bool);
 
@@ -441,8 +469,9 @@ fn initialise(dataset: &Dataset, warnings: &mut Vec<String>) -> Result<(Dataset,
     let (dataset, hs) = usable_views(dataset, warnings);
     if dataset.num_frames() < MIN_IMAGES {
         return Err(Error::Degenerate(format!(
-            "{} usable image(s); a calibration needs at least {MIN_IMAGES}",
-            dataset.num_frames()
+            "{} usable image(s); a calibration needs at least {MIN_IMAGES}{}",
+            dataset.num_frames(),
+            dropped_reasons(warnings)
         )));
     }
     let cameras = dataset.cameras.len();
@@ -450,7 +479,10 @@ fn initialise(dataset: &Dataset, warnings: &mut Vec<String>) -> Result<(Dataset,
     let mut any_fallback = false;
     let mut views: Vec<Vec<Option<Pose>>> = Vec::with_capacity(cameras);
     for (k, cam) in dataset.cameras.iter().enumerate() {
-        let own = own_views(&dataset, &hs, k)?;
+        let own = own_views(&dataset, &hs, k).map_err(|e| match e {
+            Error::Degenerate(m) => Error::Degenerate(m + &dropped_reasons(warnings)),
+            e => e,
+        })?;
         let (kk, poses, fallback) = if cam.model.info().pinhole_like {
             init_zhang(&dataset, k, &own, warnings)?
         } else {

@@ -17,6 +17,11 @@ use std::collections::BTreeMap;
 /// pixels beyond is rounding, not data.
 pub const OUTSIDE_MARGIN: f64 = 0.02;
 
+/// Largest fraction of a camera's observations that may lie outside its image and
+/// be dropped: a stray detection or two is noise, more means the declared size is
+/// not the images' (a calibration of what is left comes out confidently wrong).
+pub const MAX_OUTSIDE_FRACTION: f64 = 0.05;
+
 /// At most this many items are named in one warning.
 const NAMED: usize = 5;
 
@@ -30,7 +35,8 @@ fn named(items: &[String]) -> String {
 }
 
 /// Drops the observations outside their camera's image by more than
-/// [`OUTSIDE_MARGIN`], naming them in a warning; refuses data with none inside.
+/// [`OUTSIDE_MARGIN`], naming them in a warning; refuses data with none inside,
+/// and a camera with more than [`MAX_OUTSIDE_FRACTION`] of its observations outside.
 pub fn drop_outside_image(dataset: &Dataset, warnings: &mut Vec<String>) -> Result<Dataset> {
     let inside = |o: &Observation| {
         let c = &dataset.cameras[o.camera];
@@ -67,6 +73,7 @@ pub fn drop_outside_image(dataset: &Dataset, warnings: &mut Vec<String>) -> Resu
             sizes.join(", ")
         )));
     }
+    check_outside_fraction(dataset, &inside)?;
     warnings.push(format!(
         "{} observation(s) outside the image dropped: {}",
         outside.len(),
@@ -75,6 +82,42 @@ pub fn drop_outside_image(dataset: &Dataset, warnings: &mut Vec<String>) -> Resu
     let mut kept = dataset.clone();
     kept.observations.retain(inside);
     Ok(kept)
+}
+
+/// Refuses the first camera with more than [`MAX_OUTSIDE_FRACTION`] of its
+/// observations outside its image, naming its declared size and where its
+/// corners actually lie.
+fn check_outside_fraction(dataset: &Dataset, inside: &dyn Fn(&Observation) -> bool) -> Result<()> {
+    for (k, cam) in dataset.cameras.iter().enumerate() {
+        let mine: Vec<&Observation> = dataset
+            .observations
+            .iter()
+            .filter(|o| o.camera == k)
+            .collect();
+        let outside = mine.iter().filter(|o| !inside(o)).count();
+        if outside == 0 || (outside as f64) <= MAX_OUTSIDE_FRACTION * mine.len() as f64 {
+            continue;
+        }
+        let span = |i: usize| {
+            let (lo, hi) = mine
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), o| {
+                    (lo.min(o.uv[i]), hi.max(o.uv[i]))
+                });
+            format!("{lo:.0}..{hi:.0}")
+        };
+        return Err(Error::Degenerate(format!(
+            "camera {}: {outside} of its {} observations ({:.0}%) lie outside its declared {}×{} image (its corners span u {}, v {}): check its width and height",
+            cam.name,
+            mine.len(),
+            100.0 * outside as f64 / mine.len() as f64,
+            cam.width,
+            cam.height,
+            span(0),
+            span(1)
+        )));
+    }
+    Ok(())
 }
 
 /// A view's homography may miss its corners by this fraction of the view's size in

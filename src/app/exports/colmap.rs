@@ -52,7 +52,7 @@ pub fn cameras_txt(c: &CalibrationJson, warnings: &mut Vec<String>) -> Option<St
         lines.push(format!(
             "# camera {}: deformcal camera `{}` ({})",
             k + 1,
-            cam.name,
+            super::printable(&cam.name),
             cam.model
         ));
         lines.push(format!(

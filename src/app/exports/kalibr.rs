@@ -36,7 +36,7 @@ fn kalibr_model(c: &CameraJson) -> Result<KalibrCamera, String> {
             if k3 != 0.0 {
                 return Err(format!(
                     "{KALIBR_FILE}: camera `{}` is left out: Kalibr's pinhole-radtan has no k3 and `{}` has k3 = {}",
-                    c.name, c.model, fmt(k3)
+                    super::printable(&c.name), c.model, fmt(k3)
                 ));
             }
             let d = vec![g("k1"), g("k2"), g("p1"), g("p2")];
@@ -49,7 +49,7 @@ fn kalibr_model(c: &CameraJson) -> Result<KalibrCamera, String> {
         }
         LensModel::OpenCv8 => Err(format!(
             "{KALIBR_FILE}: camera `{}` is left out: Kalibr has no rational (`opencv8`) lens model",
-            c.name
+            super::printable(&c.name)
         )),
         LensModel::Kb4 => {
             let d = vec![g("k1"), g("k2"), g("k3"), g("k4")];
@@ -111,7 +111,8 @@ pub fn camchain_yaml(c: &CalibrationJson, warnings: &mut Vec<String>) -> Option<
         let _ = writeln!(
             s,
             "# cam{n}: deformcal camera `{}` ({})",
-            cam.name, cam.model
+            super::printable(&cam.name),
+            cam.model
         );
         let _ = writeln!(s, "cam{n}:");
         if let Some(prev) = previous {

@@ -44,20 +44,81 @@ fn key_of(name: &str) -> String {
     k
 }
 
+/// A camera name as it may stand in a comment or a message line: control
+/// characters and Unicode line separators become escapes, so a name read from a
+/// hand-edited calibration.json cannot end the comment and write a value of its own
+/// (config names are restricted to a safe set; see docs/conventions.md).
+pub fn printable(name: &str) -> String {
+    let mut s = String::with_capacity(name.len());
+    for c in name.chars() {
+        if c.is_control() || c == '\u{2028}' || c == '\u{2029}' {
+            s.extend(c.escape_default());
+        } else {
+            s.push(c);
+        }
+    }
+    s
+}
+
+/// Two cameras whose names become the same name in an export.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NameClash {
+    /// The index of the earlier camera.
+    pub first: usize,
+    /// The index of the later camera.
+    pub second: usize,
+    /// What both would be written as, e.g. "opencv.yaml key prefix `a_b_`".
+    pub what: String,
+}
+
+/// The first pair of cameras whose names collide in any export: the file names
+/// (`<camera>.cameramodel`, `<camera>_camera_info.yaml`, `uncertainty_<camera>.svg`
+/// share one stem, compared without case because macOS and Windows file systems
+/// ignore it) and the keys (opencv.yaml's `<camera>_` prefixes, ROS `camera_name`,
+/// Kalibr's rostopic). Kalibr's `camN` and COLMAP's ids are numbered, so unique.
+/// A reader given a collided key returns one camera's values for both.
+pub fn name_clash<'a>(names: impl IntoIterator<Item = &'a str>) -> Option<NameClash> {
+    let mut files = std::collections::BTreeMap::new();
+    let mut keys = std::collections::BTreeMap::new();
+    for (k, name) in names.into_iter().enumerate() {
+        let stem = file_stem(name);
+        if let Some(&first) = files.get(&stem.to_lowercase()) {
+            return Some(NameClash {
+                first,
+                second: k,
+                what: format!("the file `{}`", model_file_name(name)),
+            });
+        }
+        files.insert(stem.to_lowercase(), k);
+        let key = key_of(name);
+        if let Some(&first) = keys.get(&key) {
+            return Some(NameClash {
+                first,
+                second: k,
+                what: format!("opencv.yaml key prefix `{key}_` (and ROS camera_name `{key}`)"),
+            });
+        }
+        keys.insert(key, k);
+    }
+    None
+}
+
 /// Why a camera is left out of an export format.
 fn unrepresentable(format: &str, c: &CameraJson) -> String {
     format!(
         "{format}: camera `{}` is left out: the format has no `{}` lens model",
-        c.name, c.model
+        printable(&c.name),
+        c.model
     )
 }
 
-/// A camera name made safe for a file name: path separators and NUL become `_`.
+/// A camera name made safe for a file name: path separators and control
+/// characters (NUL, newlines) become `_`.
 pub fn file_stem(camera: &str) -> String {
     camera
         .chars()
         .map(|c| {
-            if c == '/' || c == '\\' || c == '\0' {
+            if c == '/' || c == '\\' || c.is_control() {
                 '_'
             } else {
                 c

@@ -93,7 +93,7 @@ fn rectifications(
         }
         warnings.push(format!(
             "ROS camera_info: no stereo rectification for `{}` ({}) and `{}` ({}): OpenCV's stereoRectify needs two pinhole-like cameras of one image size; each file has R = I, P = [K | 0]",
-            a.name, a.model, b.name, b.model
+            super::printable(&a.name), a.model, super::printable(&b.name), b.model
         ));
     }
     c.cameras.iter().map(mono).collect()
@@ -109,7 +109,8 @@ pub fn camera_infos(c: &CalibrationJson, warnings: &mut Vec<String>) -> Vec<(Str
         match camera_info(cam, r, p) {
             Some(text) => files.push((file, text)),
             None => warnings.push(format!(
-                "{file}: not written: ROS has no `{}` lens model",
+                "{}: not written: ROS has no `{}` lens model",
+                super::printable(&file),
                 cam.model
             )),
         }

@@ -4,6 +4,11 @@
 //! are the start, and the walk goes only as deep as the pattern has components
 //! (unlimited with `**`). Every file name is matched with `globset`, which runs in
 //! linear time, so a hostile pattern cannot stall the run. No image is opened here.
+//!
+//! A `**` walk does not enter linked folders, so a link loop cannot list a photo
+//! many times; and one file (by its canonical path) is refused when two names reach
+//! it, for one camera (a link) or for two (overlapping patterns): it would be two
+//! views that are the same picture, or a rig with no baseline.
 use crate::app::config::PhotoPatterns;
 use crate::error::{Error, Result};
 use crate::model::camera::CameraSpec;
@@ -27,8 +32,7 @@ pub struct ImageFile {
 /// Characters that make a pattern component more than a literal name.
 const META: [char; 6] = ['*', '?', '[', ']', '{', '}'];
 
-/// Folders deeper than this below the pattern's start are not walked for `**`;
-/// it bounds the walk on a symlink loop.
+/// Folders deeper than this below the pattern's start are not walked for `**`.
 const MAX_DEPTH: usize = 32;
 
 /// Lists every camera's files and numbers the frames (SPEC §5 Photos): with one
@@ -39,6 +43,13 @@ pub fn list_photos(
     patterns: &PhotoPatterns,
     cameras: &[CameraSpec],
 ) -> Result<Vec<ImageFile>> {
+    let files = listed(base, patterns, cameras)?;
+    refuse_same_file(&files, patterns, cameras)?;
+    Ok(files)
+}
+
+/// [`list_photos`] before the check for one file listed twice.
+fn listed(base: &Path, patterns: &PhotoPatterns, cameras: &[CameraSpec]) -> Result<Vec<ImageFile>> {
     match patterns {
         PhotoPatterns::One(pattern) => {
             let names = matching(base, pattern)?;
@@ -81,6 +92,47 @@ pub fn list_photos(
     }
 }
 
+/// Refuses a file that two listed names reach (compared by canonical path), naming
+/// both names and, when they differ, both cameras.
+fn refuse_same_file(
+    files: &[ImageFile],
+    patterns: &PhotoPatterns,
+    cameras: &[CameraSpec],
+) -> Result<()> {
+    let mut seen: BTreeMap<PathBuf, &ImageFile> = BTreeMap::new();
+    for f in files {
+        // A file that cannot be resolved is reported as unreadable by detection.
+        let Ok(real) = std::fs::canonicalize(&f.path) else {
+            continue;
+        };
+        let Some(first) = seen.insert(real, f) else {
+            continue;
+        };
+        let pattern = |k: usize| match patterns {
+            PhotoPatterns::One(p) => p.clone(),
+            PhotoPatterns::PerCamera(m) => m.get(&cameras[k].name).cloned().unwrap_or_default(),
+        };
+        let message = if first.camera != f.camera {
+            format!(
+                "`{}` is matched by the patterns of both camera `{}` and camera `{}`; a photo belongs to one camera",
+                f.name, cameras[first.camera].name, cameras[f.camera].name
+            )
+        } else if first.name == f.name {
+            format!("`{}` is listed twice", f.name)
+        } else {
+            format!(
+                "`{}` and `{}` are the same file (a link); each photo may be listed once",
+                first.name, f.name
+            )
+        };
+        return Err(Error::Photos {
+            pattern: pattern(f.camera),
+            message,
+        });
+    }
+    Ok(())
+}
+
 /// The part of `name` the wildcards of `pattern` matched: `name` without the
 /// pattern's literal head and tail (`left-0042.png` of `left-*.png` is `0042`).
 pub fn time_step(pattern: &str, name: &str) -> String {
@@ -120,15 +172,15 @@ pub fn matching(base: &Path, pattern: &str) -> Result<Vec<String>> {
     let prefix = parts[..literal].join("/");
     let start = if prefix.is_empty() && pattern.starts_with('/') {
         PathBuf::from("/")
+    } else if base.as_os_str().is_empty() && prefix.is_empty() {
+        // A config in the working folder has an empty folder name.
+        PathBuf::from(".")
     } else {
         base.join(&prefix)
     };
     let rest = &parts[literal..];
-    let depth = if rest.iter().any(|p| p.contains("**")) {
-        MAX_DEPTH
-    } else {
-        rest.len()
-    };
+    let recursive = rest.iter().any(|p| p.contains("**"));
+    let depth = if recursive { MAX_DEPTH } else { rest.len() };
     if !start.is_dir() {
         return Err(fail(format!(
             "matches no file: the folder {} does not exist",
@@ -136,7 +188,7 @@ pub fn matching(base: &Path, pattern: &str) -> Result<Vec<String>> {
         )));
     }
     let mut names = Vec::new();
-    walk(&start, &prefix, depth, &mut |name| {
+    walk(&start, &prefix, depth, recursive, &mut |name| {
         if glob.is_match(name) {
             names.push(name.to_string());
         }
@@ -154,11 +206,14 @@ pub fn matching(base: &Path, pattern: &str) -> Result<Vec<String>> {
 
 /// Calls `found` with the `/`-joined name of every file up to `depth` levels below
 /// `dir` (1: `dir`'s own files). Unreadable subfolders are skipped; only an
-/// unreadable `dir` itself is an error.
+/// unreadable `dir` itself is an error. A `recursive` walk does not enter linked
+/// folders: a link to a folder above would list the same photos again, level
+/// after level.
 fn walk(
     dir: &Path,
     prefix: &str,
     depth: usize,
+    recursive: bool,
     found: &mut dyn FnMut(&str),
 ) -> std::io::Result<()> {
     if depth == 0 {
@@ -177,12 +232,17 @@ fn walk(
         } else {
             format!("{prefix}/{file_name}")
         };
-        // `metadata` follows symlinks, so linked photos and folders count.
+        // `metadata` follows symlinks, so linked photos (and, outside `**`, linked
+        // folders) count.
         let Ok(meta) = std::fs::metadata(entry.path()) else {
             continue;
         };
+        let linked = entry.file_type().is_ok_and(|t| t.is_symlink());
         if meta.is_dir() {
-            let _ = walk(&entry.path(), &name, depth - 1, found);
+            if recursive && linked {
+                continue;
+            }
+            let _ = walk(&entry.path(), &name, depth - 1, recursive, found);
         } else if meta.is_file() {
             found(&name);
         }
