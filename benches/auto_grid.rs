@@ -4,8 +4,10 @@
 //! regret (chosen method's mapping error to the true lens over the best
 //! candidate's), and every case that misses a target. The rule has no threshold
 //! fitted to data; the seeds here (100 + k) are used by no test.
-//! `cargo bench --bench auto_grid` (about an hour on 2 cores);
-//! `GRID=quick cargo bench --bench auto_grid` for a 25-frame slice.
+//! `cargo bench --bench auto_grid` (the whole grid, hours on 2 cores);
+//! `GRID=quick` for a 25-frame slice (one seed), `GRID=medium` for 12/25/40 frames;
+//! `PRIORS=none` runs every candidate with the paper's prior-free model instead of
+//! the default priors, for comparison.
 #[path = "../tests/common/auto_grid.rs"]
 mod grid;
 use deformcal::model::lens::LensModel;
@@ -13,7 +15,8 @@ use grid::{Board, Case};
 use rayon::prelude::*;
 
 fn main() {
-    let quick = std::env::var("GRID").is_ok_and(|v| v == "quick");
+    let grid_kind = std::env::var("GRID").unwrap_or_default();
+    let paper = std::env::var("PRIORS").is_ok_and(|v| v == "none");
     let boards = [
         Board::Rigid,
         Board::Paraboloid(0.5),
@@ -22,7 +25,11 @@ fn main() {
         Board::Plate(1.0),
         Board::Plate(4.0),
     ];
-    let frames: &[usize] = if quick { &[25] } else { &[12, 25, 40, 100] };
+    let frames: &[usize] = match grid_kind.as_str() {
+        "quick" => &[25],
+        "medium" => &[12, 25, 40],
+        _ => &[12, 25, 40, 100],
+    };
     let models = [
         LensModel::Radial3,
         LensModel::OpenCv5,
@@ -30,7 +37,7 @@ fn main() {
         LensModel::Kb4,
         LensModel::DoubleSphere,
     ];
-    let seeds: u64 = if quick { 1 } else { 2 };
+    let seeds: u64 = if grid_kind.is_empty() { 2 } else { 1 };
     let mut cases = Vec::new();
     for &board in &boards {
         for print_mm in [0.0, 0.2] {
@@ -56,16 +63,25 @@ fn main() {
     let outcomes: Vec<grid::Outcome> = cases
         .par_iter()
         .map(|&c| {
-            let o = grid::run(c);
+            let o = grid::run_with(c, paper);
             bar.inc(1);
             o
         })
         .collect();
     bar.finish_and_clear();
     println!(
-        "auto over {} cases ({}):",
+        "auto over {} cases ({}, {}):",
         outcomes.len(),
-        if quick { "quick" } else { "full grid" }
+        if grid_kind.is_empty() {
+            "full grid"
+        } else {
+            grid_kind.as_str()
+        },
+        if paper {
+            "the paper's prior-free model"
+        } else {
+            "default priors"
+        }
     );
     print!("{}", grid::table(&outcomes));
     for board in boards {
@@ -77,14 +93,24 @@ fn main() {
         let mut r: Vec<f64> = of.iter().map(grid::Outcome::regret).collect();
         r.sort_by(f64::total_cmp);
         let chose = |m| of.iter().filter(|o| o.chosen == m).count();
+        // Geometric means: the errors span orders of magnitude across lens models.
+        let mean = |f: &dyn Fn(&grid::Outcome) -> f64| {
+            (of.iter().map(|o| f(o).ln()).sum::<f64>() / of.len() as f64).exp()
+        };
+        use deformcal::Method::{Dynamic, Full, Standard};
         println!(
-            "  {:<14} median regret {:.3}, worst {:.3}; chose standard {}, dynamic {}, full {}",
+            "  {:<14} median regret {:.3}, worst {:.3}; chose standard {}, dynamic {}, full {}; \
+             geometric mean error px: standard {:.3}, dynamic {:.3}, full {:.3}, auto {:.3}",
             board.label(),
             r[r.len() / 2],
             r[r.len() - 1],
-            chose(deformcal::Method::Standard),
-            chose(deformcal::Method::Dynamic),
-            chose(deformcal::Method::Full)
+            chose(Standard),
+            chose(Dynamic),
+            chose(Full),
+            mean(&|o| o.error_of(Standard)),
+            mean(&|o| o.error_of(Dynamic)),
+            mean(&|o| o.error_of(Full)),
+            mean(&|o| o.error_of(o.chosen)),
         );
     }
     let failures = grid::failures(&outcomes);

@@ -52,7 +52,8 @@ typedef struct DcObservation {
 
 /* Calibration settings; zero-initialise and set what you need (0 = default). */
 typedef struct DcOptions {
-  const char* method;   /* "standard", "static", "dynamic" or "full"; NULL = "full" */
+  const char* method;   /* "standard", "static", "dynamic", "full" or "auto"; NULL = "auto" (chosen
+                         * by cross-validation); the board priors are estimated from the data */
   int32_t robust;       /* 1 = Cauchy loss (default), -1 = plain least squares */
   double loss_scale_px; /* Cauchy scale, 1e-3 to 1e4; 0 = 1 px; else refused */
   int32_t threads;      /* Ceres threads, 1 to 256; 0 = 1 */

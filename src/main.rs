@@ -460,13 +460,27 @@ fn run_compare(args: CompareArgs) -> Result<()> {
     Ok(())
 }
 
+/// The files of `sfm`'s result set.
+fn sfm_files() -> fsio::Owns {
+    Box::new(|n| {
+        matches!(
+            n,
+            "sfm.json"
+                | "images.txt"
+                | "points3D.txt"
+                | "match_pairs.txt"
+                | deformcal::app::exports::COLMAP_FILE
+        )
+    })
+}
+
 fn run_sfm(args: SfmArgs) -> Result<()> {
     use deformcal::app::calibration_json::CalibrationJson;
     use deformcal::app::{exports, sfm};
     let config = Config::load(&args.config)?;
     let json = CalibrationJson::load(&args.calibration)?;
-    if json.cameras.is_empty() || config.cameras.is_empty() {
-        anyhow::bail!("{}: no camera to test", args.calibration.display());
+    if config.cameras.is_empty() {
+        anyhow::bail!("{}: no camera to test", args.config.display());
     }
     let (cam, spec) = (&json.cameras[0], &config.cameras[0]);
     if (cam.width, cam.height) != (spec.width, spec.height) {
@@ -480,13 +494,14 @@ fn run_sfm(args: SfmArgs) -> Result<()> {
             spec.height
         );
     }
+    let dir = args.output.unwrap_or_else(|| config.output_dir.join("sfm"));
+    // Staged and locked before the solves, like every result set.
+    let set = OutputSet::begin(&dir, sfm_files())?;
     let exp = protocol::sfm_for_config(&config)?;
     let tested = exp
         .run(&cam.intrinsics)
         .with_context(|| format!("structure from motion with {}", args.calibration.display()))?;
     let truth = exp.run(&exp.true_camera)?;
-    let dir = args.output.unwrap_or_else(|| config.output_dir.join("sfm"));
-    std::fs::create_dir_all(&dir).with_context(|| dir.display().to_string())?;
     let mut summary = exp.summary_json(&tested);
     summary["loop_closure_px_true_camera"] = truth.loop_closure_px.into();
     let mut warnings = Vec::new();
@@ -501,8 +516,9 @@ fn run_sfm(args: SfmArgs) -> Result<()> {
         files.push((exports::COLMAP_FILE, c));
     }
     for (name, text) in &files {
-        fsio::write_atomic(&dir.join(name), text.as_bytes())?;
+        fsio::write_atomic(&set.path().join(name), text.as_bytes())?;
     }
+    set.commit()?;
     for w in warnings {
         eprintln!("warning: {w}");
     }
@@ -721,12 +737,9 @@ fn run_merge(args: MergeArgs) -> Result<()> {
     let set = OutputSet::begin(&args.output, fsio::protocol_files())?;
     let mut files = Vec::new();
     for p in &args.shards {
-        let text = fsio::read_limited(p, fsio::MAX_DATA_BYTES)?;
-        let f: protocol::ShardFile = serde_json::from_slice(&text)
-            .map_err(|e| anyhow::anyhow!("{}: not a deformcal shard file ({e})", p.display()))?;
-        files.push(f);
+        files.push((p.display().to_string(), protocol::read_shard(p)?));
     }
-    let (header, rows) = protocol::merge(files)?;
+    let (header, rows) = protocol::merge_named(files)?;
     let summary = deformcal::app::protocol_report::write_outputs(set.path(), &header, &rows)?;
     set.commit()?;
     print_summary(&summary);
@@ -821,6 +834,65 @@ fn brief(message: &str) -> String {
     format!("{cut}… (message cut)")
 }
 
+/// The signals that stop a run: Ctrl-C, `kill`, a closed terminal.
+const STOP_SIGNALS: [(libc::c_int, &str); 3] = [
+    (libc::SIGINT, "SIGINT"),
+    (libc::SIGTERM, "SIGTERM"),
+    (libc::SIGHUP, "SIGHUP"),
+];
+
+/// Stops the run cleanly on [`STOP_SIGNALS`]: they are blocked in every thread
+/// (threads inherit the mask, so this runs before any is started) and taken by
+/// one thread with `sigwait`, which then runs ordinary code, not a handler: it
+/// removes the unfinished output, says so on one `error:` line and exits
+/// 128 + the signal, as a shell reports it. SIGXFSZ (a file size limit) is
+/// ignored, so the write fails with "File too large" and the run ends through
+/// its ordinary error path.
+fn handle_signals() {
+    // SAFETY: an empty sigset_t filled by sigemptyset/sigaddset, and masks and
+    // dispositions changed before any other thread exists.
+    let set = unsafe {
+        let mut set: libc::sigset_t = std::mem::zeroed();
+        libc::sigemptyset(&mut set);
+        for (signal, _) in STOP_SIGNALS {
+            libc::sigaddset(&mut set, signal);
+        }
+        libc::pthread_sigmask(libc::SIG_BLOCK, &set, std::ptr::null_mut());
+        libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
+        set
+    };
+    let watch = move || loop {
+        let mut signal: libc::c_int = 0;
+        // SAFETY: `set` is initialised and its signals are blocked in this thread.
+        if unsafe { libc::sigwait(&set, &mut signal) } != 0 {
+            continue;
+        }
+        let name = STOP_SIGNALS
+            .iter()
+            .find(|(s, _)| *s == signal)
+            .map_or("a signal", |(_, n)| n);
+        let removed = fsio::remove_unfinished();
+        let what = if removed.is_empty() {
+            String::new()
+        } else {
+            "; removed the unfinished output".to_string()
+        };
+        eprintln!("error: stopped by {name}{what}");
+        // SAFETY: _exit ends the process without running atexit handlers, which
+        // could race the solver threads still running.
+        unsafe { libc::_exit(128 + signal) };
+    };
+    // Without the thread the signals stay blocked; better to let them act.
+    if std::thread::Builder::new()
+        .name("signals".into())
+        .spawn(watch)
+        .is_err()
+    {
+        // SAFETY: as above.
+        unsafe { libc::pthread_sigmask(libc::SIG_UNBLOCK, &set, std::ptr::null_mut()) };
+    }
+}
+
 fn main() -> ExitCode {
     // Like any Unix filter, end quietly when the reader of stdout goes away
     // (`deformcal … | head`); Rust's default turns that into a panic.
@@ -828,6 +900,7 @@ fn main() -> ExitCode {
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
+    handle_signals();
     let cli = Cli::parse();
     let result = match cli.command {
         Some(Command::Calibrate(a)) => run_calibrate(a),

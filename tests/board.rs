@@ -414,11 +414,24 @@ fn config_keys_select_orders_priors_and_geometry() {
         c.calibration.auto_candidates,
         vec![Method::Standard, Method::Full, Method::Full3, Method::Full4]
     );
-    // The defaults: no prior, the paper's paraboloid.
+    // The defaults: the static and bend priors estimated, the paper's paraboloid.
     let c = parse("").unwrap();
     assert_eq!(c.calibration.method, MethodChoice::Fixed(Method::Full));
     let s = SolverSettings::from(&c.calibration);
-    assert!(!s.board.any());
+    assert!(s.board.static_sigma_auto && s.board.bend_sigma_auto);
+    // `priors = "none"`: the paper's prior-free model; a key set explicitly wins.
+    let c = parse("priors = \"none\"\n").unwrap();
+    assert!(!SolverSettings::from(&c.calibration).board.any());
+    let c = parse("priors = \"none\"\nbend_prior_mm = 1\n").unwrap();
+    let s = SolverSettings::from(&c.calibration);
+    assert!(s.board.bend_sigma_m == Some(1e-3) && !s.board.static_sigma_auto);
+    let c = parse("static_prior_mm = \"none\"\n").unwrap();
+    let s = SolverSettings::from(&c.calibration);
+    assert!(!s.board.static_sigma_auto && s.board.static_sigma_m.is_none());
+    assert!(s.board.bend_sigma_auto);
+    // Without `method`, `auto`.
+    let c = Config::parse("[data]\nsynthetic = \"t2\"\n", Path::new("c.toml")).unwrap();
+    assert_eq!(c.calibration.method, MethodChoice::Auto);
     for (bad, says) in [
         ("bend_order = 5\n", "bend_order must be 2, 3, 4"),
         (

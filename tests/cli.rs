@@ -302,3 +302,295 @@ fn too_few_usable_images_say_why_the_others_were_dropped() {
         "{e}"
     );
 }
+
+/// A synthetic t2 config of `images` images calibrated with `method`, writing to `out/`.
+fn t2_config(case: &Case, images: usize, method: &str) -> PathBuf {
+    case.write(
+        "t2.toml",
+        &format!(
+            "[data]\nsynthetic = \"t2\"\nimages = {images}\nseed = 3\n[calibration]\nmethod = \"{method}\"\n[output]\ndir = \"out\"\n"
+        ),
+    )
+}
+
+/// The entries of `dir` a run stages or sets aside (`.out.new-*`, `*old*`).
+fn litter(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().to_string())
+        .filter(|n| n.contains(".new-") || n.contains("old-"))
+        .collect()
+}
+
+/// `cmd` run as a program of this test, or `None` when it is missing or not
+/// permitted (not root, no `chattr`): the test then says it skipped.
+fn try_run(cmd: &str, args: &[&str]) -> Option<()> {
+    let out = Command::new(cmd).args(args).output().ok()?;
+    out.status.success().then_some(())
+}
+
+/// The one `error:` line of a failed run.
+fn one_error(out: &Output) -> String {
+    let stderr = String::from_utf8_lossy(&out.stderr).to_string();
+    assert!(!out.status.success(), "expected failure: {stderr}");
+    assert!(!stderr.contains("panicked"), "panic: {stderr}");
+    let errors: Vec<&str> = stderr
+        .lines()
+        .filter(|l| l.starts_with("error: "))
+        .collect();
+    assert_eq!(errors.len(), 1, "one error line expected: {stderr}");
+    errors[0].to_string()
+}
+
+#[test]
+fn an_output_that_cannot_be_swapped_in_fails_before_the_data_are_read() {
+    let case = Case::new();
+    // The data are missing: the output's problem must be found first.
+    let config = case.config("");
+    let out = case.path("out");
+    std::fs::create_dir(&out).unwrap();
+    std::fs::write(out.join("notes.txt"), "mine").unwrap();
+    if try_run("chattr", &["+i", out.to_str().unwrap()]).is_none() {
+        eprintln!("skipped: cannot make a directory immutable (chattr +i needs root)");
+        return;
+    }
+    let run = deformcal(&["--config", config.to_str().unwrap()]);
+    let _ = try_run("chattr", &["-i", out.to_str().unwrap()]);
+    let e = one_error(&run);
+    assert!(e.contains("out") && e.contains("cannot"), "{e}");
+    assert!(!e.contains("obs.csv"), "the data were read first: {e}");
+    assert!(
+        litter(case.dir.path()).is_empty(),
+        "{:?}",
+        litter(case.dir.path())
+    );
+    assert_eq!(
+        std::fs::read_to_string(out.join("notes.txt")).unwrap(),
+        "mine"
+    );
+
+    // A mount point cannot be renamed either.
+    if try_run(
+        "mount",
+        &["--bind", out.to_str().unwrap(), out.to_str().unwrap()],
+    )
+    .is_none()
+    {
+        eprintln!("skipped: cannot bind-mount (needs root)");
+        return;
+    }
+    let run = deformcal(&["--config", config.to_str().unwrap()]);
+    let _ = try_run("umount", &[out.to_str().unwrap()]);
+    let e = one_error(&run);
+    assert!(e.contains("out") && !e.contains("obs.csv"), "{e}");
+    assert!(
+        litter(case.dir.path()).is_empty(),
+        "{:?}",
+        litter(case.dir.path())
+    );
+}
+
+#[cfg(unix)]
+#[test]
+fn a_symlinked_output_stays_a_link_and_its_aliases_share_the_lock() {
+    use deformcal::app::fsio::OutputSet;
+    let case = Case::new();
+    let config = t2_config(&case, 12, "standard");
+    let real = case.path("real");
+    std::fs::create_dir(&real).unwrap();
+    std::fs::write(real.join("calibration.json"), "old").unwrap();
+    let link = case.path("out");
+    std::os::unix::fs::symlink("real", &link).unwrap();
+    let run = deformcal(&["--config", config.to_str().unwrap()]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(
+        link.symlink_metadata().unwrap().file_type().is_symlink(),
+        "the link was replaced"
+    );
+    let json = std::fs::read_to_string(real.join("calibration.json")).unwrap();
+    assert!(
+        json.contains("\"method\": \"standard\""),
+        "the link's target kept its old result"
+    );
+    // A run through one alias locks out a run through the other.
+    let held = OutputSet::begin(&real, deformcal::app::output::calibration_files()).unwrap();
+    let run = deformcal(&["--config", config.to_str().unwrap()]);
+    let e = one_error(&run);
+    assert!(
+        e.contains("another deformcal run is writing this output directory"),
+        "{e}"
+    );
+    drop(held);
+    // A dangling link is followed to where it points.
+    std::fs::remove_file(&link).unwrap();
+    std::os::unix::fs::symlink("elsewhere/new", &link).unwrap();
+    let run = deformcal(&["--config", config.to_str().unwrap()]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(link.symlink_metadata().unwrap().file_type().is_symlink());
+    assert!(case.path("elsewhere/new/calibration.json").is_file());
+    assert!(litter(case.dir.path()).is_empty() && litter(&case.path("elsewhere")).is_empty());
+}
+
+#[cfg(unix)]
+#[test]
+fn the_output_dir_keeps_its_mode_and_owner() {
+    use std::os::unix::fs::{MetadataExt, PermissionsExt};
+    let case = Case::new();
+    let config = t2_config(&case, 12, "standard");
+    let out = case.path("out");
+    std::fs::create_dir(&out).unwrap();
+    std::fs::set_permissions(&out, std::fs::Permissions::from_mode(0o700)).unwrap();
+    let run = deformcal(&["--config", config.to_str().unwrap()]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let mode = |p: &Path| std::fs::metadata(p).unwrap().mode() & 0o7777;
+    assert_eq!(
+        mode(&out),
+        0o700,
+        "a private output became {:o}",
+        mode(&out)
+    );
+    // A group-shared dir of another owner, where permitted (root).
+    std::fs::set_permissions(&out, std::fs::Permissions::from_mode(0o2770)).unwrap();
+    if std::os::unix::fs::chown(&out, Some(65534), Some(65534)).is_ok() {
+        let run = deformcal(&["--config", config.to_str().unwrap()]);
+        assert!(
+            run.status.success(),
+            "{}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+        let meta = std::fs::metadata(&out).unwrap();
+        assert_eq!(meta.mode() & 0o7777, 0o2770, "{:o}", meta.mode() & 0o7777);
+        assert_eq!((meta.uid(), meta.gid()), (65534, 65534));
+    } else {
+        eprintln!("skipped the owner check: chown needs root");
+    }
+    // A new output dir gets what any new dir gets here (the umask's default).
+    let fresh = case.path("fresh");
+    let probe = case.path("probe");
+    std::fs::create_dir(&probe).unwrap();
+    let run = deformcal(&[
+        "--config",
+        config.to_str().unwrap(),
+        "--output",
+        fresh.to_str().unwrap(),
+    ]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert_eq!(mode(&fresh), mode(&probe));
+}
+
+#[cfg(unix)]
+#[test]
+fn a_signal_removes_the_staging_dir_and_says_so() {
+    let case = Case::new();
+    // Long enough to be caught in the solve.
+    let config = t2_config(&case, 600, "full");
+    for (signal, name) in [
+        (libc::SIGINT, "SIGINT"),
+        (libc::SIGTERM, "SIGTERM"),
+        (libc::SIGHUP, "SIGHUP"),
+    ] {
+        let child = Command::new(env!("CARGO_BIN_EXE_deformcal"))
+            .args(["--config", config.to_str().unwrap()])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let start = std::time::Instant::now();
+        while litter(case.dir.path()).is_empty() {
+            assert!(
+                start.elapsed().as_secs() < 60,
+                "{name}: no staging dir appeared"
+            );
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+        std::thread::sleep(std::time::Duration::from_millis(300));
+        // SAFETY: signalling our own child, whose pid is live until waited for.
+        assert_eq!(unsafe { libc::kill(child.id() as i32, signal) }, 0);
+        let out = child.wait_with_output().unwrap();
+        assert!(!out.status.success(), "{name}: exit 0");
+        assert!(
+            out.status.code().is_some(),
+            "{name}: killed by the signal, no cleanup"
+        );
+        let e = one_error(&out);
+        assert!(e.contains(name), "{name}: {e}");
+        assert!(
+            litter(case.dir.path()).is_empty(),
+            "{name}: {:?}",
+            litter(case.dir.path())
+        );
+        assert!(
+            !case.path("out").exists(),
+            "{name}: an output was swapped in"
+        );
+    }
+}
+
+#[cfg(unix)]
+#[test]
+fn a_file_size_limit_gives_one_error_line_and_no_staging_dir() {
+    use std::os::unix::process::CommandExt;
+    let case = Case::new();
+    let config = t2_config(&case, 12, "standard");
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_deformcal"));
+    cmd.args(["--config", config.to_str().unwrap()]);
+    // SAFETY: setrlimit is async-signal-safe, as pre_exec requires.
+    unsafe {
+        cmd.pre_exec(|| {
+            let limit = libc::rlimit {
+                rlim_cur: 4096,
+                rlim_max: 4096,
+            };
+            libc::setrlimit(libc::RLIMIT_FSIZE, &limit);
+            Ok(())
+        });
+    }
+    let out = cmd.output().unwrap();
+    assert_ne!(out.status.code(), None, "killed by SIGXFSZ");
+    let e = one_error(&out);
+    assert!(
+        e.contains("too large") || e.contains("File too large"),
+        "{e}"
+    );
+    assert!(
+        litter(case.dir.path()).is_empty(),
+        "{:?}",
+        litter(case.dir.path())
+    );
+    assert!(!case.path("out").exists());
+}
+
+#[test]
+fn a_later_run_removes_the_staging_dir_of_a_dead_one() {
+    let case = Case::new();
+    let config = t2_config(&case, 12, "standard");
+    // What a run killed with SIGKILL leaves: its staging dir, full.
+    let stale = case.path(".out.new-4194304-abcdef");
+    std::fs::create_dir_all(stale.join("sub")).unwrap();
+    std::fs::write(stale.join("calibration.json"), "half").unwrap();
+    std::fs::write(stale.join("sub/x"), "x").unwrap();
+    let run = deformcal(&["--config", config.to_str().unwrap()]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(!stale.exists(), "the stale staging dir is still there");
+    assert!(case.path("out/calibration.json").is_file());
+}

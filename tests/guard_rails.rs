@@ -131,7 +131,10 @@ fn a_solve_that_does_not_converge_exits_3_and_replaces_the_previous_result() {
     ]);
     assert_eq!(
         last_line(&export, 1),
-        format!("error: invalid argument: this calibration failed its guard rails ({reason}); its models are not exported")
+        format!(
+            "error: {}: this calibration FAILED its guard rails ({reason}); it cannot be used",
+            out.join("FAILED-calibration.json").display()
+        )
     );
     assert!(!dir.path().join("models").exists());
 

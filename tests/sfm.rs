@@ -246,3 +246,66 @@ fn sfm_subcommand_tests_a_calibration_and_refuses_a_missing_one() {
     .unwrap();
     assert!(json["loop_closure_px"].as_f64().unwrap() > 0.0);
 }
+
+#[test]
+fn sfm_refuses_a_failed_or_invalid_calibration_with_the_file_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = dir.path().join("c.toml");
+    std::fs::write(
+        &cfg,
+        "[data]\nsynthetic = \"t2\"\nimages = 12\n[calibration]\nmethod = \"standard\"\n[sfm]\nframes = 30\n[output]\ndir = \"out\"\n",
+    )
+    .unwrap();
+    let bin = env!("CARGO_BIN_EXE_deformcal");
+    let c = cfg.to_str().unwrap();
+    let run = Command::new(bin).args(["--config", c]).output().unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let good: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("out/calibration.json")).unwrap(),
+    )
+    .unwrap();
+    let mut failed = good.clone();
+    failed["failure"] = serde_json::json!({"reasons": ["the RMSE is 9 px"], "hints": []});
+    let mut negative = good;
+    negative["cameras"][0]["intrinsics"]["fx"] = (-1.0).into();
+    for (name, json, message) in [
+        (
+            "FAILED-calibration.json",
+            failed,
+            "FAILED its guard rails (the RMSE is 9 px)",
+        ),
+        (
+            "negative.json",
+            negative,
+            "intrinsics.fx must be positive (got -1)",
+        ),
+    ] {
+        let path = dir.path().join(name);
+        std::fs::write(&path, json.to_string()).unwrap();
+        let out = Command::new(bin)
+            .args([
+                "sfm",
+                "--config",
+                c,
+                "--calibration",
+                path.to_str().unwrap(),
+            ])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{name} accepted");
+        assert_eq!(err.lines().count(), 1, "{err}");
+        assert!(
+            err.contains(&format!("{name}: ")) && err.contains(message),
+            "{err}"
+        );
+        assert!(
+            !dir.path().join("out/sfm").exists(),
+            "{name}: output written"
+        );
+    }
+}

@@ -1,5 +1,6 @@
 //! The `calibration.json` schema (SPEC §5): what a calibration writes and what
-//! `export` and the C API read back.
+//! `export`, `sfm` and `compare` read back (one reader, [`CalibrationJson::load`],
+//! which refuses what cannot be used).
 use crate::model::board::Paraboloid;
 use crate::model::lens::{Intrinsics, LensModel};
 use crate::model::selection::Selection;
@@ -108,19 +109,67 @@ impl<'de> Deserialize<'de> for NamedValues {
     }
 }
 
+/// Largest image side `calibration.json` may give, pixels: several times the
+/// largest single sensors, and small enough that a grid over the image stays cheap.
+pub const MAX_IMAGE_SIDE: u32 = 100_000;
+
 impl CalibrationJson {
-    /// Reads a `calibration.json` deformcal wrote, its models checked.
+    /// Reads a `calibration.json` deformcal wrote for use (export, sfm, compare):
+    /// refuses a failed calibration and cameras whose size or intrinsics cannot
+    /// describe a camera, naming the file (see [`CalibrationJson::check`]).
     pub fn load(path: &std::path::Path) -> crate::Result<CalibrationJson> {
-        let data_error = |line: usize, message: String| crate::Error::Data {
-            path: path.to_path_buf(),
-            line: line as u64,
-            message,
-        };
         let text = crate::app::fsio::read_limited(path, crate::app::fsio::MAX_DATA_BYTES)?;
-        let json: CalibrationJson = serde_json::from_slice(&text)
-            .map_err(|e| data_error(e.line(), format!("not a deformcal calibration.json: {e}")))?;
-        json.check_models().map_err(|m| data_error(0, m))?;
+        let json: CalibrationJson =
+            serde_json::from_slice(&text).map_err(|e| crate::Error::Data {
+                path: path.to_path_buf(),
+                line: e.line() as u64,
+                message: format!("not a deformcal calibration.json: {e}"),
+            })?;
+        // A whole-file problem has no line to name, so the file alone is named.
+        json.check().map_err(|message| crate::Error::Config {
+            path: path.to_path_buf(),
+            message,
+        })?;
         Ok(json)
+    }
+
+    /// Whether the calibration can be used: it did not fail its guard rails, has
+    /// a camera, and every camera has a size and intrinsics of its model that are
+    /// finite with positive focal lengths.
+    pub fn check(&self) -> std::result::Result<(), String> {
+        if let Some(f) = &self.failure {
+            return Err(format!(
+                "this calibration FAILED its guard rails ({}); it cannot be used",
+                f.reasons.join("; ")
+            ));
+        }
+        if self.cameras.is_empty() {
+            return Err("`cameras` is empty: no camera to use".into());
+        }
+        self.check_models()?;
+        for (k, cam) in self.cameras.iter().enumerate() {
+            let at = format!("cameras[{k}] `{}`", crate::app::config::short(&cam.name));
+            for (key, side) in [("width", cam.width), ("height", cam.height)] {
+                if !(1..=MAX_IMAGE_SIDE).contains(&side) {
+                    return Err(format!(
+                        "{at}: {key} must be 1 to {MAX_IMAGE_SIDE} pixels (got {side})"
+                    ));
+                }
+            }
+            for (name, v) in cam.intrinsics.named() {
+                if !v.is_finite() {
+                    return Err(format!("{at}: intrinsics.{name} is not finite ({v})"));
+                }
+            }
+            for (name, v) in [("fx", cam.intrinsics.fx()), ("fy", cam.intrinsics.fy())] {
+                if v <= 0.0 {
+                    return Err(format!(
+                        "{at}: intrinsics.{name} must be positive (got {v})"
+                    ));
+                }
+            }
+        }
+        Ok(())
     }
 
     /// Every camera's intrinsics are of the model the camera names: the keys of

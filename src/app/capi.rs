@@ -8,9 +8,11 @@ use crate::app::config::{
 use crate::app::guard::{self, Rules};
 use crate::model::camera::CameraSpec;
 use crate::model::lens::{LensModel, MAX_PARAMS};
+use crate::model::selection::{AutoSettings, MethodChoice};
 use crate::model::synthetic::{Generator, Preset, MAX_IMAGES};
 use crate::solver::problem::Loss;
 use crate::solver::problem::SolverSettings;
+use crate::solver::select::calibrate_auto;
 use crate::{calibrate, Dataset, Method, Request, Target};
 use std::ffi::{c_char, CStr};
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -170,7 +172,7 @@ fn guarded(error: *mut c_char, len: usize, f: impl FnOnce() -> Result<(), CError
 /// Solver settings from `DcOptions`: 0 means the default, anything out of range is
 /// refused (never silently replaced).
 fn settings_from(o: &DcOptions) -> Result<SolverSettings, String> {
-    let mut settings = SolverSettings::default();
+    let mut settings = SolverSettings::recommended();
     match o.robust {
         -1 => settings.loss = Loss::None,
         0 | 1 => {}
@@ -399,24 +401,34 @@ unsafe fn dataset_from(
 ///
 /// # Safety
 /// `options` is null or points to a `DcOptions` whose `method` is null or NUL-terminated.
-unsafe fn request_from(options: *const DcOptions) -> Result<Request, CError> {
+unsafe fn request_from(options: *const DcOptions) -> Result<(MethodChoice, Request), CError> {
     let o = options.as_ref();
-    let method = match o.map(|o| o.method).filter(|m| !m.is_null()) {
+    let choice = match o.map(|o| o.method).filter(|m| !m.is_null()) {
         Some(m) => {
             let name = string(m, "method")?;
-            Method::parse(&name).ok_or(format!("unknown method `{name}`"))?
+            MethodChoice::parse(&name).ok_or(format!(
+                "unknown method `{name}`: use standard, static, dynamic, full or auto"
+            ))?
         }
-        None => Method::Full,
+        // The config's default: the method the data support.
+        None => MethodChoice::Auto,
     };
     let settings = match o {
         Some(o) => settings_from(o)?,
-        None => SolverSettings::default(),
+        None => SolverSettings::recommended(),
     };
-    Ok(Request {
-        method,
-        settings,
-        gauge: None,
-    })
+    let method = match choice {
+        MethodChoice::Fixed(m) => m,
+        MethodChoice::Auto => Method::Standard,
+    };
+    Ok((
+        choice,
+        Request {
+            method,
+            settings,
+            gauge: None,
+        },
+    ))
 }
 
 /// Copies a calibration into the caller's result and per-camera results.
@@ -534,7 +546,7 @@ unsafe fn calibrate_into(
     let target = target_from(target)?;
     let specs = camera_specs(cameras, num_cameras)?;
     let dataset = dataset_from(target, specs, observations, num_observations)?;
-    let mut request = request_from(options)?;
+    let (choice, mut request) = request_from(options)?;
     let rules = match tolerances.as_ref() {
         Some(t) => apply_tolerances(t, &mut request.settings)?,
         None => Rules { max_rmse_px: None },
@@ -550,7 +562,14 @@ unsafe fn calibrate_into(
         )
         .into());
     }
-    let c = calibrate(&dataset, &request)?;
+    let c = match choice {
+        MethodChoice::Fixed(_) => calibrate(&dataset, &request)?,
+        MethodChoice::Auto => {
+            calibrate_auto(&dataset, &request, &AutoSettings::default(), &|| {})?
+        }
+    };
+    // Judged as the method that ran (with `auto`, the one chosen).
+    request.method = c.method;
     write_results(&c, result, camera_results, num_cameras)?;
     if !frames.results.is_null() {
         for (i, f) in frame_results(&dataset, &c).into_iter().enumerate() {

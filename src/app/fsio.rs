@@ -2,7 +2,9 @@
 //! `/dev/zero` never hangs a run), single files written through a temporary file
 //! and a rename, and whole result sets staged beside the output directory and
 //! swapped in at once under an advisory lock, so a reader never sees half of one
-//! run and half of another.
+//! run and half of another. What a run leaves unfinished is removed: on an
+//! error, on a signal ([`remove_unfinished`]), and by the next run on the same
+//! output when a run died.
 use crate::error::{Error, Result};
 use fs4::fs_std::FileExt;
 use std::io::{Read, Write};
@@ -54,7 +56,16 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
-    let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(|e| Error::write(dir, e))?;
+    let tmp = tempfile::NamedTempFile::new_in(dir).map_err(|e| Error::write(dir, e))?;
+    let tmp_path = tmp.path().to_path_buf();
+    track(&tmp_path);
+    let written = write_temp(tmp, path, bytes);
+    untrack(&tmp_path);
+    written
+}
+
+/// [`write_atomic`]'s part after the temporary file is created.
+fn write_temp(mut tmp: tempfile::NamedTempFile, path: &Path, bytes: &[u8]) -> Result<()> {
     tmp.write_all(bytes).map_err(|e| Error::write(path, e))?;
     tmp.as_file()
         .sync_all()
@@ -93,11 +104,206 @@ pub fn protocol_files() -> Owns {
     })
 }
 
+/// What this process is writing and has not committed: staging directories and
+/// temporary files, removed by [`remove_unfinished`] when a signal stops the run
+/// (a destructor does not run then).
+static UNFINISHED: std::sync::Mutex<Vec<PathBuf>> = std::sync::Mutex::new(Vec::new());
+
+fn unfinished() -> std::sync::MutexGuard<'static, Vec<PathBuf>> {
+    UNFINISHED.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+fn track(path: &Path) {
+    unfinished().push(path.to_path_buf());
+}
+
+fn untrack(path: &Path) {
+    unfinished().retain(|p| p != path);
+}
+
+/// Removes everything this process staged or is writing and has not committed,
+/// and blocks any new staging for the rest of the process: for the end of a run
+/// stopped by a signal, just before it exits. Returns what it removed.
+pub fn remove_unfinished() -> Vec<PathBuf> {
+    let list = unfinished();
+    let mut removed = Vec::new();
+    for path in list.iter() {
+        // Workers may still be creating files in it: a few rounds catch them.
+        for _ in 0..10 {
+            let gone = match std::fs::symlink_metadata(path) {
+                Err(_) => true,
+                Ok(m) if m.is_dir() => std::fs::remove_dir_all(path).is_ok(),
+                Ok(_) => std::fs::remove_file(path).is_ok(),
+            };
+            if gone {
+                break;
+            }
+        }
+        if std::fs::symlink_metadata(path).is_err() {
+            removed.push(path.clone());
+        }
+    }
+    // Held until the process exits, so no thread stages anything new.
+    std::mem::forget(list);
+    removed
+}
+
+/// Most symbolic links followed when resolving an output path (the kernel's own limit).
+const MAX_LINKS: usize = 40;
+
+/// The directory `target` names, absolute: a symbolic link in its place is
+/// followed (even to where nothing exists yet) and the longest existing prefix
+/// is canonicalised, so a link stays a link, the link's target receives the
+/// results, and every alias of one directory takes the same lock.
+fn resolve(target: &Path) -> Result<PathBuf> {
+    let mut path = std::path::absolute(target).map_err(|e| Error::io(target, e))?;
+    let mut links = 0;
+    while std::fs::symlink_metadata(&path).is_ok_and(|m| m.file_type().is_symlink()) {
+        links += 1;
+        if links > MAX_LINKS {
+            return Err(Error::Invalid(format!(
+                "{}: more than {MAX_LINKS} symbolic links (a loop?)",
+                target.display()
+            )));
+        }
+        let to = std::fs::read_link(&path).map_err(|e| Error::io(&path, e))?;
+        path = path.parent().unwrap_or(Path::new("/")).join(to);
+    }
+    let (mut existing, mut rest) = (path.clone(), Vec::new());
+    while std::fs::symlink_metadata(&existing).is_err() {
+        match existing.file_name() {
+            Some(name) => rest.push(name.to_os_string()),
+            None => break,
+        }
+        existing.pop();
+    }
+    let mut resolved = existing
+        .canonicalize()
+        .map_err(|e| Error::io(&existing, e))?;
+    resolved.extend(rest.iter().rev());
+    Ok(resolved)
+}
+
+/// Ownership and mode of a directory, to give the swapped-in set.
+#[derive(Debug, Clone, Copy)]
+struct DirMode {
+    mode: u32,
+    owner: Option<(u32, u32)>,
+}
+
+#[cfg(unix)]
+fn dir_mode(meta: &std::fs::Metadata, with_owner: bool) -> DirMode {
+    use std::os::unix::fs::MetadataExt;
+    DirMode {
+        mode: meta.mode() & 0o7777,
+        owner: with_owner.then(|| (meta.uid(), meta.gid())),
+    }
+}
+
+#[cfg(not(unix))]
+fn dir_mode(_: &std::fs::Metadata, _: bool) -> DirMode {
+    DirMode {
+        mode: 0o755,
+        owner: None,
+    }
+}
+
+/// Gives `dir` the owner (where permitted) and then the mode of `to`: a chown by
+/// an ordinary user clears the set-group-id bit, so the mode goes last.
+fn apply_mode(dir: &Path, to: DirMode) {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        if let Some((uid, gid)) = to.owner {
+            if std::os::unix::fs::chown(dir, Some(uid), Some(gid)).is_err() {
+                // Not the owner's to give away: the group alone may still be ours.
+                let _ = std::os::unix::fs::chown(dir, None, Some(gid));
+            }
+        }
+        let _ = std::fs::set_permissions(dir, std::fs::Permissions::from_mode(to.mode));
+    }
+    #[cfg(not(unix))]
+    let _ = (dir, to);
+}
+
+/// Checks before any work that the swap can happen: a directory can be created
+/// in `parent` and renamed there (its mode is what a new output directory gets),
+/// and `target`, if it exists, can be renamed away and back (not immutable, not a
+/// mount point, not in a sticky directory of another user). Returns the new
+/// directory's mode.
+fn probe_swap(parent: &Path, name: &str, target: &Path) -> Result<DirMode> {
+    let pid = std::process::id();
+    let probe = parent.join(format!(".{name}.probe-{pid}"));
+    let moved = parent.join(format!(".{name}.probe-{pid}-moved"));
+    std::fs::create_dir(&probe).map_err(|e| Error::write(parent, e))?;
+    let mode = std::fs::metadata(&probe).map(|m| dir_mode(&m, false));
+    let renamed = std::fs::rename(&probe, &moved);
+    let _ = std::fs::remove_dir(&probe);
+    let _ = std::fs::remove_dir(&moved);
+    renamed.map_err(|e| Error::write(parent, e))?;
+    let mode = mode.map_err(|e| Error::io(parent, e))?;
+    if target.is_dir() {
+        let aside = parent.join(format!(".{name}.old-{pid}-probe"));
+        std::fs::rename(target, &aside).map_err(|e| {
+            Error::write(
+                target,
+                std::io::Error::new(
+                    e.kind(),
+                    format!("the output directory cannot be replaced ({e})"),
+                ),
+            )
+        })?;
+        std::fs::rename(&aside, target).map_err(|e| {
+            Error::write(
+                target,
+                std::io::Error::new(
+                    e.kind(),
+                    format!(
+                        "moved to {} and cannot be moved back ({e})",
+                        aside.display()
+                    ),
+                ),
+            )
+        })?;
+    }
+    Ok(mode)
+}
+
+/// Removes what earlier runs on `target` left beside it when they died (a
+/// SIGKILL, a power cut): staging and probe directories, and a set-aside old
+/// output, which goes back in place if the swap stopped half way. Called under
+/// the lock, which no live run on `target` holds: all of these are stale.
+fn remove_stale(parent: &Path, name: &str, target: &Path) {
+    let Ok(entries) = std::fs::read_dir(parent) else {
+        return;
+    };
+    let (new, old, probe) = (
+        format!(".{name}.new-"),
+        format!(".{name}.old-"),
+        format!(".{name}.probe-"),
+    );
+    for entry in entries.flatten() {
+        let file = entry.file_name().to_string_lossy().to_string();
+        let path = entry.path();
+        if file.starts_with(&old) && !target.exists() && std::fs::rename(&path, target).is_ok() {
+            continue;
+        }
+        if file.starts_with(&new) || file.starts_with(&old) {
+            remove_tree(&path);
+        } else if file.starts_with(&probe) {
+            let _ = std::fs::remove_dir(&path);
+        }
+    }
+}
+
 /// A result set being written: a staging directory beside the output directory,
 /// held under the output directory's advisory lock until [`OutputSet::commit`]
 /// swaps it in. Dropped without a commit, it leaves the old output untouched.
 pub struct OutputSet {
+    /// The output directory, resolved ([`resolve`]).
     target: PathBuf,
+    /// The mode of a new output directory (the umask's default in its parent).
+    new_mode: DirMode,
     staging: Option<tempfile::TempDir>,
     owns: Owns,
     // Held for the lifetime of the set; the OS releases it on drop or exit.
@@ -119,31 +325,35 @@ fn lock_path(parent: &Path, name: &str) -> PathBuf {
 }
 
 impl OutputSet {
-    /// Takes the lock of `target` and creates the staging directory: call it before
-    /// the work, so an unwritable or busy output fails at once.
+    /// Takes the lock of `target`, removes what dead runs left, checks that the
+    /// swap can happen and creates the staging directory: call it before the
+    /// work, so an unwritable, busy or unreplaceable output fails at once.
     pub fn begin(target: &Path, owns: Owns) -> Result<OutputSet> {
+        let needs_name = || {
+            Error::Invalid(format!(
+                "{}: the output directory needs a name (not `.` or `/`)",
+                target.display()
+            ))
+        };
+        target
+            .file_name()
+            .filter(|n| *n != "." && *n != "..")
+            .ok_or_else(needs_name)?;
+        let given = target;
+        let target = resolve(given)?;
         if target.exists() && !target.is_dir() {
             return Err(Error::write(
-                target,
+                given,
                 std::io::Error::other("exists and is not a directory"),
             ));
         }
         let name = target
             .file_name()
             .map(|n| n.to_string_lossy().to_string())
-            .filter(|n| n != "." && n != "..")
-            .ok_or_else(|| {
-                Error::Invalid(format!(
-                    "{}: the output directory needs a name (not `.` or `/`)",
-                    target.display()
-                ))
-            })?;
-        let parent = target
-            .parent()
-            .filter(|p| !p.as_os_str().is_empty())
-            .unwrap_or(Path::new("."));
-        std::fs::create_dir_all(parent).map_err(|e| Error::write(parent, e))?;
-        let lock_file = lock_path(parent, &name);
+            .ok_or_else(needs_name)?;
+        let parent = target.parent().ok_or_else(needs_name)?.to_path_buf();
+        std::fs::create_dir_all(&parent).map_err(|e| Error::write(&parent, e))?;
+        let lock_file = lock_path(&parent, &name);
         let lock = std::fs::OpenOptions::new()
             .create(true)
             .truncate(false)
@@ -152,15 +362,22 @@ impl OutputSet {
             .map_err(|e| Error::write(&lock_file, e))?;
         match lock.try_lock_exclusive() {
             Ok(true) => {}
-            Ok(false) => return Err(Error::Locked(target.into())),
+            Ok(false) => return Err(Error::Locked(given.into())),
             Err(e) => return Err(Error::write(&lock_file, e)),
         }
+        remove_stale(&parent, &name, &target);
+        let new_mode = probe_swap(&parent, &name, &target)?;
+        // Tracked before it exists: a signal in between finds nothing to remove.
+        let mut unfinished = unfinished();
         let staging = tempfile::Builder::new()
-            .prefix(&format!(".{name}.new-"))
-            .tempdir_in(parent)
-            .map_err(|e| Error::write(parent, e))?;
+            .prefix(&format!(".{name}.new-{}-", std::process::id()))
+            .tempdir_in(&parent)
+            .map_err(|e| Error::write(&parent, e))?;
+        unfinished.push(staging.path().to_path_buf());
+        drop(unfinished);
         Ok(OutputSet {
-            target: target.into(),
+            target,
+            new_mode,
             staging: Some(staging),
             owns,
             _lock: lock,
@@ -172,19 +389,26 @@ impl OutputSet {
         self.staging.as_ref().expect("staging until commit").path()
     }
 
-    /// The output directory the set will replace.
+    /// The output directory the set will replace, resolved (a symbolic link
+    /// followed, absolute).
     pub fn target(&self) -> &Path {
         &self.target
     }
 
     /// Carries over what the old output holds besides this kind of set, then swaps
     /// the staged set in: old directory aside, new one in place, old one removed.
+    /// The new directory keeps the old one's mode and owner (where permitted).
+    /// On any failure the staging directory is removed and the old output is
+    /// left as it was.
     pub fn commit(mut self) -> Result<()> {
         let staging = self.staging.take().expect("staging until commit");
         let new = staging.path().to_path_buf();
         let target = self.target.clone();
         let mut dirs = Vec::new();
+        let mut mode = self.new_mode;
         if target.is_dir() {
+            let meta = std::fs::metadata(&target).map_err(|e| Error::io(&target, e))?;
+            mode = dir_mode(&meta, true);
             for entry in std::fs::read_dir(&target).map_err(|e| Error::io(&target, e))? {
                 let entry = entry.map_err(|e| Error::io(&target, e))?;
                 let name = entry.file_name();
@@ -199,36 +423,60 @@ impl OutputSet {
                 }
             }
         }
-        #[cfg(unix)]
-        {
-            use std::os::unix::fs::PermissionsExt;
-            let _ = std::fs::set_permissions(&new, std::fs::Permissions::from_mode(0o755));
-        }
-        // Sub-directories move last, just before the swap, so a failure above
-        // leaves the old output whole.
-        for (from, to) in dirs {
-            std::fs::rename(&from, &to).map_err(|e| Error::write(&to, e))?;
-        }
-        let new = staging.keep();
-        let old = if target.exists() {
-            let parent = new.parent().expect("staging has a parent");
-            let aside = tempfile::Builder::new()
-                .prefix(".deformcal-old-")
-                .tempdir_in(parent)
-                .map_err(|e| Error::write(parent, e))?
-                .keep();
-            let old = aside.join("old");
-            std::fs::rename(&target, &old).map_err(|e| Error::write(&target, e))?;
-            Some(aside)
+        apply_mode(&new, mode);
+        // Sub-directories move last, just before the swap, and move back if the
+        // swap fails, so a failure leaves the old output whole.
+        let mut moved = Vec::new();
+        let swapped = (|| {
+            for (from, to) in &dirs {
+                std::fs::rename(from, to).map_err(|e| Error::write(to, e))?;
+                moved.push((from, to));
+            }
+            swap(&new, &target)
+        })();
+        if swapped.is_err() {
+            for (from, to) in moved.iter().rev() {
+                let _ = std::fs::rename(to, from);
+            }
+            // TempDir's drop removes the staging directory.
+            drop(staging);
         } else {
-            None
-        };
-        std::fs::rename(&new, &target).map_err(|e| Error::write(&target, e))?;
-        if let Some(old) = old {
-            remove_tree(&old);
+            let _ = staging.keep();
         }
-        Ok(())
+        untrack(&new);
+        swapped
     }
+}
+
+/// Moves `target` (if any) aside, `new` into its place, and removes the old one;
+/// if `new` cannot go in place, the old output goes back.
+fn swap(new: &Path, target: &Path) -> Result<()> {
+    let parent = new.parent().expect("staging has a parent");
+    let name = target
+        .file_name()
+        .map(|n| n.to_string_lossy().to_string())
+        .unwrap_or_default();
+    let aside = if target.exists() {
+        let nanos = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.subsec_nanos())
+            .unwrap_or(0);
+        let aside = parent.join(format!(".{name}.old-{}-{nanos}", std::process::id()));
+        std::fs::rename(target, &aside).map_err(|e| Error::write(target, e))?;
+        Some(aside)
+    } else {
+        None
+    };
+    if let Err(e) = std::fs::rename(new, target) {
+        if let Some(aside) = &aside {
+            let _ = std::fs::rename(aside, target);
+        }
+        return Err(Error::write(target, e));
+    }
+    if let Some(old) = aside {
+        remove_tree(&old);
+    }
+    Ok(())
 }
 
 /// Most threads [`remove_tree`] unlinks with.
@@ -280,6 +528,10 @@ fn remove_tree(dir: &Path) {
 impl Drop for OutputSet {
     fn drop(&mut self) {
         // An uncommitted staging directory is removed by TempDir's own drop.
-        self.staging.take();
+        if let Some(staging) = self.staging.take() {
+            let path = staging.path().to_path_buf();
+            drop(staging);
+            untrack(&path);
+        }
     }
 }

@@ -81,6 +81,43 @@ pub struct Header {
     /// How `auto` chose per subset, when the run records its choice.
     #[serde(default)]
     pub auto: Option<AutoRun>,
+    /// The fingerprint of the data the run saw ([`data_fingerprint`]): shards
+    /// computed on other data (another seed, an edited CSV) are not one run.
+    pub data: String,
+}
+
+/// A fingerprint of the observations a run calibrates from and of its reference
+/// set: taken from the loaded data rather than the files, so every source is
+/// covered alike (a synthetic preset's seed and image count, CSV or corners.vnl
+/// bytes, the detections in photos) and the fingerprint changes exactly when
+/// what the calibrations see changes. 64-bit FNV-1a: shards of one run are
+/// compared, not guarded against forgery.
+pub fn data_fingerprint(dataset: &Dataset, reference: Option<&Dataset>) -> String {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut eat = |bytes: &[u8]| {
+        for &b in bytes {
+            h = (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
+        }
+    };
+    for d in std::iter::once(dataset).chain(reference) {
+        eat(&(d.frame_ids.len() as u64).to_le_bytes());
+        for id in &d.frame_ids {
+            eat(&id.to_le_bytes());
+        }
+        eat(&(d.observations.len() as u64).to_le_bytes());
+        for o in &d.observations {
+            for n in [o.camera, o.frame, o.corner] {
+                eat(&(n as u64).to_le_bytes());
+            }
+            for x in [o.uv[0], o.uv[1], o.weight] {
+                eat(&x.to_bits().to_le_bytes());
+            }
+        }
+    }
+    format!(
+        "{} observations, fnv1a64 {h:016x}",
+        dataset.observations.len()
+    )
 }
 
 /// `auto`'s settings in a protocol run: every subset gets one more task, which
@@ -291,6 +328,7 @@ impl Shard {
             }
         };
         if let Some(id) = number("SLURM_ARRAY_TASK_ID")? {
+            // Without _MAX the range is taken from _MIN and _COUNT; the task must lie in it.
             let min = number("SLURM_ARRAY_TASK_MIN")?.unwrap_or(0);
             let count = number("SLURM_ARRAY_TASK_COUNT")?.ok_or_else(|| {
                 Error::Invalid(
@@ -305,6 +343,11 @@ impl Shard {
                     "--shard auto: the Slurm array must be one contiguous range such as --array=0-{} \
                      (got tasks {min} to {max}, step {step}, {count} tasks)",
                     count.max(1) - 1
+                )));
+            }
+            if id > max {
+                return Err(Error::Invalid(format!(
+                    "--shard auto: SLURM_ARRAY_TASK_ID {id} is outside the array's tasks {min} to {max}"
                 )));
             }
             return Ok((
@@ -421,6 +464,7 @@ pub fn plan(config: &Config, protocol: &ProtocolConfig) -> Result<Plan> {
         protocol.seed,
     )?;
     let header = Header {
+        data: data_fingerprint(&dataset, reference_data.as_ref()),
         dataset: dataset_name(config),
         subsets: protocol.subsets,
         images_per_subset: protocol.images_per_subset,
@@ -1079,26 +1123,90 @@ fn finite(v: f64) -> Option<f64> {
     v.is_finite().then_some(v)
 }
 
-/// Checks that shard files come from one run and together cover every task once;
-/// returns the header and the rows in task order.
+impl ShardFile {
+    /// Refuses a shard file whose header is out of bounds or whose shard is no
+    /// slice of a run (index not below count).
+    pub fn check(&self) -> Result<()> {
+        let [index, count] = self.shard;
+        if index >= count {
+            return Err(Error::Invalid(format!(
+                "shard {index}/{count} is impossible: the index must be below the count"
+            )));
+        }
+        self.header.check()
+    }
+}
+
+/// Reads and checks a shard file, naming it in any error (see [`parse_shard`]).
+pub fn read_shard(path: &std::path::Path) -> Result<ShardFile> {
+    let bytes = crate::app::fsio::read_limited(path, crate::app::fsio::MAX_DATA_BYTES)?;
+    parse_shard(&bytes, path)
+}
+
+/// Parses and checks ([`ShardFile::check`]) the bytes of shard file `path`.
+pub fn parse_shard(bytes: &[u8], path: &std::path::Path) -> Result<ShardFile> {
+    let file: ShardFile = serde_json::from_slice(bytes).map_err(|e| Error::Data {
+        path: path.to_path_buf(),
+        line: e.line() as u64,
+        message: format!("not a deformcal shard file: {e}"),
+    })?;
+    file.check().map_err(|e| Error::Config {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    Ok(file)
+}
+
+/// [`merge_named`] with each shard named by its `i/N`.
 pub fn merge(files: Vec<ShardFile>) -> Result<(Header, Vec<Row>)> {
-    let first = files
+    merge_named(
+        files
+            .into_iter()
+            .map(|f| (format!("shard {}/{}", f.shard[0], f.shard[1]), f))
+            .collect(),
+    )
+}
+
+/// Checks that shard files (with the names to give them in messages) come from
+/// one run (same header, data fingerprint included) and together cover every
+/// task once; returns the header and the rows in task order.
+pub fn merge_named(files: Vec<(String, ShardFile)>) -> Result<(Header, Vec<Row>)> {
+    let (first_name, first) = files
         .first()
         .ok_or_else(|| Error::Invalid("no shard files to merge".into()))?;
-    let header = first.header.clone();
-    header.check()?;
-    let mut slots: Vec<Option<Row>> = vec![None; header.tasks()];
-    for f in files {
+    let (first_name, header) = (first_name.clone(), first.header.clone());
+    let mut count = None;
+    let mut slots: Vec<Option<Row>> = Vec::new();
+    for (name, f) in files {
+        f.check()
+            .map_err(|e| Error::Invalid(format!("{name}: {e}")))?;
         if f.header != header {
+            let what = if f.header.data != header.data {
+                format!("other data ({} vs {})", f.header.data, header.data)
+            } else {
+                "another run (config or seed differ)".to_string()
+            };
             return Err(Error::Invalid(format!(
-                "shard {}/{} comes from a different run (config, seed or data differ)",
-                f.shard[0], f.shard[1]
+                "{name} and {first_name} are shards of {what}: merge the shards of one run"
             )));
+        }
+        match count {
+            None => count = Some((f.shard[1], name.clone())),
+            Some((n, ref other)) if n != f.shard[1] => {
+                return Err(Error::Invalid(format!(
+                    "{name} is a shard of {} but {other} one of {n}: merge the shards of one run",
+                    f.shard[1]
+                )));
+            }
+            Some(_) => {}
+        }
+        if slots.is_empty() {
+            slots = vec![None; header.tasks()];
         }
         for row in f.rows {
             let Some(t) = header.slot_of(&row) else {
                 return Err(Error::Invalid(format!(
-                    "a row (subset {}, method {}{}) lies outside the run",
+                    "{name}: a row (subset {}, method {}{}) lies outside the run",
                     row.subset,
                     row.method,
                     if row.auto { ", auto" } else { "" }
@@ -1106,7 +1214,7 @@ pub fn merge(files: Vec<ShardFile>) -> Result<(Header, Vec<Row>)> {
             };
             if slots[t].is_some() {
                 return Err(Error::Invalid(format!(
-                    "subset {} × {} appears in two shards",
+                    "subset {} × {} appears twice (again in {name})",
                     row.subset, row.method
                 )));
             }

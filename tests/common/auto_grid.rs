@@ -76,6 +76,11 @@ impl Outcome {
 
 /// Runs one case with the project's default settings (priors estimated).
 pub fn run(case: Case) -> Outcome {
+    run_with(case, false)
+}
+
+/// [`run`], or with the paper's prior-free model where `paper`.
+pub fn run_with(case: Case, paper: bool) -> Outcome {
     let mut g = Generator::new(Preset::T2, Some(case.frames), case.seed).with_models(&[case.model]);
     match case.board {
         Board::Rigid => g.bend_scale = 0.0,
@@ -91,7 +96,11 @@ pub fn run(case: Case) -> Outcome {
     g.spec.print_sigma_z_m = case.print_mm * 1e-3;
     g.noise_px = case.noise_px;
     let (dataset, truth) = g.generate();
-    let settings = SolverSettings::recommended();
+    let settings = if paper {
+        SolverSettings::default()
+    } else {
+        SolverSettings::recommended()
+    };
     let request = |method| Request {
         method,
         settings: settings.clone(),
