@@ -3,6 +3,7 @@
 pub mod board;
 pub mod camera;
 pub mod dataset;
+pub mod epipolar;
 pub mod fisheye_init;
 pub mod lens;
 pub mod metrics;
