@@ -446,7 +446,7 @@ fn config_keys_select_orders_priors_and_geometry() {
         ("bend_prior_mm = 0\n", "bend_prior_mm must be a positive"),
         (
             "static_prior_mm = \"automatic\"\n",
-            "static_prior_mm must be a number of millimetres or \"auto\"",
+            "static_prior_mm must be a number of millimetres, \"auto\" or \"none\"",
         ),
         (
             "static_prior_mm = true\n",
@@ -455,7 +455,7 @@ fn config_keys_select_orders_priors_and_geometry() {
         ("bend_prior_mm = [1]\n", "bend_prior_mm must be a number"),
         (
             "bend_smoothness = \"smooth\"\n",
-            "bend_smoothness must be a number of millimetres or \"auto\"",
+            "bend_smoothness must be a number of millimetres, \"auto\" or \"none\"",
         ),
         (
             "bend_smoothness = -0.1\n",

@@ -47,6 +47,14 @@ fn request(method: Method) -> Request {
     }
 }
 
+/// What a config with only `method` asks for: the board priors estimated.
+fn recommended(method: Method) -> Request {
+    Request {
+        settings: SolverSettings::recommended(),
+        ..request(method)
+    }
+}
+
 fn files_in(dir: &Path) -> Vec<String> {
     let mut v: Vec<String> = std::fs::read_dir(dir)
         .unwrap()
@@ -283,10 +291,10 @@ fn an_rmse_far_above_the_data_fails_by_each_rule() {
 fn max_rmse_px_in_the_config_is_the_bound() {
     let dir = tempfile::tempdir().unwrap();
     let c = dir.path().join("c.toml");
-    std::fs::write(&c, "[data]\nsynthetic = \"t2\"\nimages = 12\n[calibration]\nmax_rmse_px = 0.1\n[output]\ndir = \"out\"\n").unwrap();
+    std::fs::write(&c, "[data]\nsynthetic = \"t2\"\nimages = 12\n[calibration]\nmethod = \"full\"\nmax_rmse_px = 0.1\n[output]\ndir = \"out\"\n").unwrap();
     let run = deformcal(&["--config", c.to_str().unwrap()]);
     let (d, _) = Generator::new(Preset::T2, Some(12), 1).generate();
-    let lib = calibrate(&d, &request(Method::Full)).unwrap();
+    let lib = calibrate(&d, &recommended(Method::Full)).unwrap();
     assert!(last_line(&run, 3).starts_with(&format!(
         "error: the calibration FAILED: its RMSE {:.3} px is above calibration.max_rmse_px = 0.1 px; wrote ",
         lib.rmse_px
@@ -582,14 +590,14 @@ fn opencv_yaml_gives_each_camera_its_own_rmse() {
     let c = dir.path().join("c.toml");
     std::fs::write(
         &c,
-        "[data]\nsynthetic = \"stereo\"\nimages = 15\n[output]\ndir = \"out\"\n",
+        "[data]\nsynthetic = \"stereo\"\nimages = 15\n[calibration]\nmethod = \"full\"\n[output]\ndir = \"out\"\n",
     )
     .unwrap();
     ok(&deformcal(&["--config", c.to_str().unwrap()]));
     let yaml = std::fs::read_to_string(dir.path().join("out/opencv.yaml")).unwrap();
     // The same calibration in the library; each camera's RMSE over its own residuals.
     let (d, _) = Generator::new(Preset::Stereo, Some(15), 1).generate();
-    let lib = calibrate(&d, &request(Method::Full)).unwrap();
+    let lib = calibrate(&d, &recommended(Method::Full)).unwrap();
     for (k, name) in ["cam0", "cam1"].iter().enumerate() {
         let (mut sq, mut n) = (0.0, 0);
         for (o, r) in lib.dataset.observations.iter().zip(lib.residuals.chunks(2)) {

@@ -4,8 +4,8 @@
 //! as the nominal board of later calibrations. Only this module reads or writes
 //! the file; what a calibration does with the geometry is `model::board`'s
 //! `BoardPriors`.
-use crate::app::config::number;
 use crate::app::fsio::{read_limited, write_atomic};
+use crate::app::text::number;
 use crate::error::{Error, Result};
 use crate::model::board::BoardGeometry;
 use crate::model::target::Target;

@@ -148,7 +148,7 @@ impl CalibrationJson {
         }
         self.check_models()?;
         for (k, cam) in self.cameras.iter().enumerate() {
-            let at = format!("cameras[{k}] `{}`", crate::app::config::short(&cam.name));
+            let at = format!("cameras[{k}] `{}`", crate::app::text::short(&cam.name));
             for (key, side) in [("width", cam.width), ("height", cam.height)] {
                 if !(1..=MAX_IMAGE_SIDE).contains(&side) {
                     return Err(format!(

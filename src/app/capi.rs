@@ -564,9 +564,7 @@ unsafe fn calibrate_into(
     }
     let c = match choice {
         MethodChoice::Fixed(_) => calibrate(&dataset, &request)?,
-        MethodChoice::Auto => {
-            calibrate_auto(&dataset, &request, &AutoSettings::default(), &|| {})?
-        }
+        MethodChoice::Auto => calibrate_auto(&dataset, &request, &AutoSettings::default(), &|| {})?,
     };
     // Judged as the method that ran (with `auto`, the one chosen).
     request.method = c.method;

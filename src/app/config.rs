@@ -1,4 +1,5 @@
 //! The TOML config (SPEC §5): typed, unknown keys rejected, values checked by key.
+pub use crate::app::text::{number, short};
 use crate::error::{Error, Result};
 use crate::model::board::{BoardGeometry, BoardPriors, Method};
 use crate::model::camera::CameraSpec;
@@ -661,26 +662,6 @@ pub const BOARD_MM_RANGE: (f64, f64) = (1e-4, 1e4);
 /// prior holds the coefficients at zero as `fix` would, with a badly scaled
 /// weight; above it the prior does nothing.
 pub const LENS_PRIOR_RANGE: (f64, f64) = (1e-6, 1e3);
-
-/// A number for a message: plain where that is short, else in exponent form
-/// (1e-300 is written so, not with 300 zeros).
-pub fn number(v: f64) -> String {
-    let a = v.abs();
-    if v == 0.0 || !v.is_finite() || (1e-5..1e12).contains(&a) {
-        format!("{v}")
-    } else {
-        format!("{v:e}")
-    }
-}
-
-/// A value cut to a readable length for a message.
-pub fn short(s: &str) -> String {
-    if s.chars().count() > 40 {
-        format!("{}…", s.chars().take(40).collect::<String>())
-    } else {
-        s.to_string()
-    }
-}
 
 /// Why `name` is not a camera name, if it is not: ASCII letters, digits, `_`, `-`,
 /// `.` and space, starting with a letter or digit (docs/conventions.md, Camera

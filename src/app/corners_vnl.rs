@@ -91,7 +91,7 @@ fn compile_patterns(
                     Error::Invalid(format!(
                         "{}: data.camera_patterns of `{}` is not a usable pattern (at most {MAX_PATTERN_CHARS} characters)",
                         path.display(),
-                        crate::app::config::short(&c.name)
+                        crate::app::text::short(&c.name)
                     ))
                 }),
         })
@@ -209,7 +209,7 @@ fn number(path: &Path, line: u64, s: &str, what: &str) -> Result<Option<f64>> {
         data_err(
             path,
             line,
-            format!("{what} `{}` is not a number", crate::app::config::short(s)),
+            format!("{what} `{}` is not a number", crate::app::text::short(s)),
         )
     })?;
     if !v.is_finite() {

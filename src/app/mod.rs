@@ -23,4 +23,5 @@ pub mod report;
 pub mod sfm;
 pub mod sfm_report;
 pub mod source;
+pub mod text;
 pub mod uncertainty_plot;

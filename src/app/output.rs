@@ -197,8 +197,8 @@ fn check_model_files<'a>(names: impl Iterator<Item = &'a str>) -> Result<()> {
         None => Ok(()),
         Some(c) => Err(Error::Invalid(format!(
             "cameras `{}` and `{}` would both be written as {}; rename one",
-            exports::printable(&crate::app::config::short(names[c.first])),
-            exports::printable(&crate::app::config::short(names[c.second])),
+            exports::printable(&crate::app::text::short(names[c.first])),
+            exports::printable(&crate::app::text::short(names[c.second])),
             c.what
         ))),
     }

@@ -103,15 +103,17 @@ pub fn calibrate_auto_sharing(
             (m, r)
         })
         .collect();
-    let standard = fits
+    let mut fits = fits;
+    let at = fits
         .iter()
-        .find(|(m, _)| *m == Method::Standard)
-        .map(|(_, r)| r)
+        .position(|(m, _)| *m == Method::Standard)
         .expect("checked: standard is a candidate");
-    let standard = match standard {
-        Ok(c) => c,
-        Err(e) => return Err(Error::Degenerate(format!("`standard` failed: {e}"))),
-    };
+    // `standard` failing is the data's fault, in its own words.
+    if fits[at].1.is_err() {
+        return Err(fits.swap_remove(at).1.err().expect("checked: an error"));
+    }
+    let fits = fits;
+    let standard = fits[at].1.as_ref().expect("checked: a calibration");
     // Every candidate is cross-validated on the same data: what `standard` kept.
     let cv = &standard.dataset;
     if !can_cross_validate(cv.num_frames(), auto) {
