@@ -584,7 +584,11 @@ fn export_reads_back_a_nan_written_as_null() {
 fn import_quotes_camera_names_so_the_csv_reads_back() {
     let dir = tempfile::tempdir().unwrap();
     let config = dir.path().join("c.toml");
+    // A comma is no character of a camera name (docs/conventions.md): refused by name.
     std::fs::write(&config, format!("{T2}[[cameras]]\nname = \"left,cam\"\nwidth = 1936\nheight = 1216\nmodel = \"radial3\"\n")).unwrap();
+    let e = fails(&deformcal(&["--config", config.to_str().unwrap()]));
+    assert!(e.contains("`left,cam` contains ,"), "{e}");
+    std::fs::write(&config, format!("{T2}[[cameras]]\nname = \"left cam\"\nwidth = 1936\nheight = 1216\nmodel = \"radial3\"\n")).unwrap();
     let csv = dir.path().join("obs.csv");
     ok(&deformcal(&[
         "import",
@@ -594,7 +598,7 @@ fn import_quotes_camera_names_so_the_csv_reads_back() {
         csv.to_str().unwrap(),
     ]));
     let spec = deformcal::model::camera::CameraSpec::new(
-        "left,cam",
+        "left cam",
         1936,
         1216,
         deformcal::LensModel::Radial3,
@@ -637,7 +641,7 @@ fn a_huge_camera_name_is_quoted_briefly() {
     .unwrap();
     let e = fails(&deformcal(&["--config", config.to_str().unwrap()]));
     assert!(
-        e.contains("is 900000 bytes long; at most 200 are allowed"),
+        e.contains("is 900000 bytes long; at most 64 are allowed"),
         "{e}"
     );
 }

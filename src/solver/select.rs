@@ -110,7 +110,7 @@ pub fn calibrate_auto_sharing(
         .expect("checked: standard is a candidate");
     // `standard` failing is the data's fault, in its own words.
     if fits[at].1.is_err() {
-        return Err(fits.swap_remove(at).1.err().expect("checked: an error"));
+        return Err(fits.swap_remove(at).1.expect_err("checked: an error"));
     }
     let fits = fits;
     let standard = fits[at].1.as_ref().expect("checked: a calibration");
