@@ -256,3 +256,21 @@ fn a_failed_evaluation_names_the_likely_input() {
         "{e}"
     );
 }
+
+/// Photos of 1936 × 1216 declared as 100000 × 62800 images: the corners fill a
+/// corner of the declared image and no focal length fits. The error names the
+/// declared size, not the board's perspective.
+#[test]
+fn a_declared_image_far_larger_than_the_photos_is_named() {
+    let (mut d, _) = Generator::new(Preset::T2, Some(12), 4).generate();
+    d.cameras[0].width = 100_000;
+    d.cameras[0].height = 62_800;
+    let e = calibrate(&d, &request(Method::Standard))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("of its declared 100000 × 62800 image; check the camera's width and height"),
+        "{e}"
+    );
+    assert!(!e.contains("perspective"), "{e}");
+}

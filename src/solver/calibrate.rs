@@ -391,8 +391,38 @@ fn init_fisheye(dataset: &Dataset, k: usize, own: &[(usize, Matrix3<f64>)]) -> R
     Ok((kk, views, false))
 }
 
+/// Corners spanning less than 1/this of both image sides tell of a declared
+/// image size that is not the photos'.
+const SMALL_SPAN_FRACTION: f64 = 20.0;
+
 /// Why Zhang's closed form found no focal length for a camera's homographies.
-fn no_focal_length(cam: &CameraSpec, list: &[Matrix3<f64>], e: impl std::fmt::Display) -> Error {
+fn no_focal_length(
+    dataset: &Dataset,
+    k: usize,
+    list: &[Matrix3<f64>],
+    e: impl std::fmt::Display,
+) -> Error {
+    let cam = &dataset.cameras[k];
+    // A declared image far larger than the photos (a 100000-px width for
+    // 2000-px photos) puts the nominal principal point far off the corners, and
+    // no focal length fits: that is the mistake to name, not the perspective.
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for o in dataset.observations.iter().filter(|o| o.camera == k) {
+        for a in 0..2 {
+            lo[a] = lo[a].min(o.uv[a]);
+            hi[a] = hi[a].max(o.uv[a]);
+        }
+    }
+    let (span_u, span_v) = (hi[0] - lo[0], hi[1] - lo[1]);
+    if span_u < cam.width as f64 / SMALL_SPAN_FRACTION
+        && span_v < cam.height as f64 / SMALL_SPAN_FRACTION
+    {
+        return Error::Degenerate(format!(
+            "no focal length fits the views of {}: its corners span only {span_u:.0} × {span_v:.0} px \
+             of its declared {} × {} image; check the camera's width and height (the photos' size in pixels)",
+            cam.name, cam.width, cam.height
+        ));
+    }
     // Explain the usual cause: seen through a nominal lens, every view has
     // the same orientation.
     let size = cam.width.max(cam.height) as f64;
@@ -423,7 +453,7 @@ fn init_zhang(
     let cam = &dataset.cameras[k];
     let list: Vec<Matrix3<f64>> = own.iter().map(|(_, h)| *h).collect();
     let (kk, fallback) = zhang::initial_intrinsics(&list, cam.width, cam.height)
-        .map_err(|e| no_focal_length(cam, &list, e))?;
+        .map_err(|e| no_focal_length(dataset, k, &list, e))?;
     if fallback {
         warnings.push(format!(
             "{}: Zhang's closed form was ill-conditioned; started from a centred principal point",
