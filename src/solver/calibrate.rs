@@ -1,7 +1,6 @@
 //! The calibration pipeline: Zhang initialisation → `standard` → the chosen method.
 use crate::error::{Error, Result};
 use crate::model::board::Method;
-use crate::model::camera::CameraSpec;
 use crate::model::dataset::Dataset;
 use crate::model::lens::Intrinsics;
 use crate::model::metrics::mapping_error;
