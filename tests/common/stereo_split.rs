@@ -25,9 +25,6 @@ pub const METHODS: [&str; 5] = ["standard", "static", "dynamic", "full", "auto"]
 /// The lens models compared.
 pub const MODELS: [LensModel; 2] = [LensModel::Radial3, LensModel::OpenCv5];
 
-/// Fewest frames per fold of `auto`'s cross-validation (as `solver::select`'s check).
-const FRAMES_PER_FOLD: usize = 2;
-
 /// The photos `left*.jpg` and `right*.jpg` of `folder` (the wildcard is the frame)
 /// detected into a stereo dataset; `work` receives detections.csv and the cache.
 pub fn load(folder: &Path, target: Target, work: &Path) -> Result<Dataset, String> {
@@ -100,7 +97,7 @@ fn with_model(data: &Dataset, model: LensModel) -> Dataset {
 }
 
 /// Every method of [`METHODS`] under every model of [`MODELS`] on every split.
-/// `auto` has as many folds as its default, at most as the training half allows.
+/// Every method with the default settings (`auto` with its default folds).
 pub fn run(data: &Dataset, splits: &[(Vec<usize>, Vec<usize>)]) -> Vec<Outcome> {
     let jobs: Vec<(usize, LensModel)> = (0..splits.len())
         .flat_map(|s| MODELS.map(|m| (s, m)))
@@ -140,17 +137,15 @@ fn calibrated(
     name: &str,
     warm: &SharedWarmStart,
 ) -> deformcal::Result<deformcal::Calibration> {
+    // What a config that names only the method gets: the board priors estimated.
     let request = |method| Request {
         method,
-        settings: SolverSettings::default(),
+        settings: SolverSettings::recommended(),
         gauge: None,
     };
     if name == "auto" {
-        let default = AutoSettings::default();
-        let auto = AutoSettings {
-            folds: default.folds.min(train.num_frames() / FRAMES_PER_FOLD),
-            ..default
-        };
+        // The default folds, which a 7-pair training half turns into leave-one-out.
+        let auto = AutoSettings::default();
         return calibrate_auto_sharing(train, &request(Method::Standard), &auto, warm, &|| {});
     }
     let method = Method::parse(name).expect("a method of METHODS");
