@@ -5,25 +5,15 @@
 mod common;
 use common::*;
 use deformcal::model::lens::LensModel;
-use deformcal::model::metrics::{mapping_error, mapping_error_rot};
+use deformcal::model::metrics::mapping_error;
 use deformcal::model::synthetic::{Generator, Preset, Truth};
 use deformcal::solver::problem::SolverSettings;
-use deformcal::{Calibration, Dataset, Method};
+use deformcal::{Dataset, Method};
 
 fn bending(model: LensModel, frames: usize, seed: u64) -> (Dataset, Truth) {
     Generator::new(Preset::T2, Some(frames), seed)
         .with_models(&[model])
         .generate()
-}
-
-fn truth_rot(c: &Calibration, t: &Truth) -> f64 {
-    let cam = &c.dataset.cameras[0];
-    mapping_error_rot(
-        &t.intrinsics[0],
-        &c.state.intrinsics[0],
-        cam.width,
-        cam.height,
-    )
 }
 
 #[test]
@@ -87,9 +77,9 @@ fn gross_outliers_on_a_bending_board_leave_every_method_near_its_clean_result() 
             Method::Full,
         ] {
             let settings = SolverSettings::recommended();
-            let base = truth_rot(&run_with(&clean, method, settings.clone()), &t);
+            let base = truth_error_rot(&run_with(&clean, method, settings.clone()), &t, 0);
             let with = run_with(&dirty, method, settings);
-            let e = truth_rot(&with, &t);
+            let e = truth_error_rot(&with, &t, 0);
             eprintln!(
                 "seed {seed} {method}: clean {base:.4} px, with {moved} outliers {e:.4} px ({} rejected)",
                 with.rejected.len()
