@@ -1,6 +1,6 @@
 // Board models: where corner i sits on the (possibly deformed) board of image j.
 //
-// Each model is one struct: its name (the method's, SPEC 2), how many
+// Each model is one struct: its name (the method's, docs/conventions.md §2), how many
 // parameters it adds per frame and per corner, the templated board point, and
 // the gauge it must hold fixed.  The reprojection functor and the problem
 // assembly are generic over these structs, so a new board model is one more
@@ -22,7 +22,7 @@ constexpr int kCorrectionStride = 3;
 // Size of the per-image paraboloid (a, b, c).
 constexpr int kParaboloidSize = 3;
 
-// a x^2 + b y^2 + c x y on the nominal board coordinates (SPEC 2).
+// a x^2 + b y^2 + c x y on the nominal board coordinates (docs/conventions.md §2).
 template <typename T>
 inline T Paraboloid(const double* x, const T* abc) {
   return abc[0] * (x[0] * x[0]) + abc[1] * (x[1] * x[1]) + abc[2] * (x[0] * x[1]);

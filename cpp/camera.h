@@ -24,7 +24,7 @@ inline void TransformPoint(const T* pose, const T* x, T* x_out) {
   x_out[2] += pose[5];
 }
 
-// Lens models (SPEC 1).  Each is one struct: its config name, its parameter
+// Lens models (docs/conventions.md §1).  Each is one struct: its config name, its parameter
 // count and one templated projection from a camera-frame point to a pixel, used
 // by every residual, with its Jacobian in closed form for the chained residuals
 // (ProjectWithJacobian, below the models).  The Rust registry

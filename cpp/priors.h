@@ -1,4 +1,4 @@
-// Gaussian priors on the board model's parameters (beyond the paper, SPEC 2): extra
+// Gaussian priors on the board model's parameters (beyond the paper, docs/conventions.md §2): extra
 // residuals on top of the gauge the parameterisation fixes, never instead of it.
 //
 // Each prior is a whitened difference r = w (value - mean), w = sigma_noise /

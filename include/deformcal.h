@@ -104,7 +104,7 @@ typedef struct DcCameraResult {
 
 /* Whole-calibration result. */
 typedef struct DcResult {
-  double rmse_px;            /* over every observation kept (SPEC's rmse_px) */
+  double rmse_px;            /* over every observation kept (docs/conventions.md §3's rmse_px) */
   int32_t converged;         /* 1 = the last solve converged (0 also returns 4) */
   int32_t iterations;        /* over all solver stages */
   uint64_t observations;     /* kept (outliers and dropped frames removed) */

@@ -219,7 +219,7 @@ fn calibrate_config(args: &CalibrateArgs) -> Result<Config> {
     Ok(config)
 }
 
-/// The default command: the protocol when the config has `[protocol]` (SPEC §5),
+/// The default command: the protocol when the config has `[protocol]` (docs/conventions.md §5),
 /// else one calibration.
 fn run_default(args: CalibrateArgs) -> Result<()> {
     let Some(path) = args.config.clone() else {

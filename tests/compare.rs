@@ -138,7 +138,7 @@ fn compare_cli(
 fn a_huge_image_is_compared_on_a_bounded_grid_and_an_absurd_one_is_refused() {
     let dir = tempfile::tempdir().unwrap();
     let mut a = serde_json::to_value(json(Preset::T2, 32, 0.0, Method::Standard)).unwrap();
-    // 4 000 000 000 pixels: SPEC's 20 px grid would be ten million points.
+    // 4 000 000 000 pixels: the 20 px grid of docs/conventions.md §3 would be ten million points.
     a["cameras"][0]["width"] = 80_000.into();
     a["cameras"][0]["height"] = 50_000.into();
     let mut b = a.clone();

@@ -257,7 +257,7 @@ fn json_and_summary_carry_the_uncertainty() {
     assert_eq!(names, ["fx", "fy", "cx", "cy", "k1", "k2"]);
     assert_eq!(cu.intrinsics_std.get("fx"), Some(u.intrinsics_std[0].1));
     assert!(back.uncertainty_note.is_none());
-    // The SPEC's keys, in the file.
+    // The keys of docs/conventions.md §5, in the file.
     let raw: serde_json::Value = serde_json::from_str(&text).unwrap();
     let unc = &raw["cameras"][0]["uncertainty"];
     assert!(unc["intrinsics_std"]["fy"].is_f64() && unc["expected_mapping_error_rot_px"].is_f64());

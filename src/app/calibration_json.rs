@@ -1,4 +1,4 @@
-//! The `calibration.json` schema (SPEC §5): what a calibration writes and what
+//! The `calibration.json` schema (docs/conventions.md §5): what a calibration writes and what
 //! `export`, `sfm` and `compare` read back (one reader, [`CalibrationJson::load`],
 //! which refuses what cannot be used).
 use crate::model::board::Paraboloid;
@@ -24,10 +24,10 @@ pub struct CameraJson {
     pub intrinsics: Intrinsics,
     pub rotation: [f64; 3],
     pub translation: [f64; 3],
-    /// This camera's RMSE over its own observations (SPEC §3's `rmse_px`, per camera).
+    /// This camera's RMSE over its own observations (docs/conventions.md §3's `rmse_px`, per camera).
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub rmse_px: Option<f64>,
-    /// What the noise alone leaves uncertain (SPEC §3a); absent when unavailable
+    /// What the noise alone leaves uncertain (docs/conventions.md §3a); absent when unavailable
     /// (the reason is in `uncertainty_note`).
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub uncertainty: Option<UncertaintyJson>,
@@ -219,15 +219,15 @@ pub struct CalibrationJson {
     /// Observations removed by outlier rejection (listed in `outliers.csv`).
     #[serde(default)]
     pub rejected_observations: usize,
-    /// σ̂, the detector noise per coordinate (SPEC §3a), and where it came from.
+    /// σ̂, the detector noise per coordinate (docs/conventions.md §3a), and where it came from.
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub noise_px: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub noise_source: Option<String>,
-    /// The share of the residual that the noise does not explain (SPEC §3a).
+    /// The share of the residual that the noise does not explain (docs/conventions.md §3a).
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub bias_ratio: Option<f64>,
-    /// Geometric AIC, pixels² (SPEC §3a).
+    /// Geometric AIC, pixels² (docs/conventions.md §3a).
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub g_aic: Option<f64>,
     /// Free parameters after the gauge.

@@ -1,7 +1,7 @@
 //! `deformcal compare a.json b.json`: how far two calibrations of the same
-//! cameras disagree (SPEC §3 mapping error, plain and with the virtual rotation
-//! profiled out), beside the difference their own uncertainties predict (SPEC
-//! §3a), so a user can tell a real difference from noise.
+//! cameras disagree (the mapping error of docs/conventions.md §3, plain and with
+//! the virtual rotation profiled out), beside the difference their own
+//! uncertainties predict (§3a), so a user can tell a real difference from noise.
 use crate::app::calibration_json::{CalibrationJson, CameraJson};
 use crate::error::{Error, Result};
 use crate::model::lens::Intrinsics;
@@ -9,7 +9,7 @@ use crate::model::metrics::{mapping_error_of, mapping_error_rot_of, MAPPING_GRID
 use nalgebra::{Vector2, Vector3};
 use std::fmt::Write;
 
-/// Most grid points a camera's comparison evaluates: SPEC §3's 20 px grid up to
+/// Most grid points a camera's comparison evaluates: docs/conventions.md §3's 20 px grid up to
 /// images of about 4 megapixels, a coarser grid of about this many points beyond,
 /// so the time does not grow with the image (a 4-gigapixel image would need ten
 /// million points and minutes).
@@ -142,7 +142,7 @@ pub fn format(a_name: &str, b_name: &str, diffs: &[CameraDiff]) -> String {
             .unwrap_or_else(|| "–".into())
     };
     for d in diffs {
-        // Only a grid coarser than SPEC §3's is worth a word.
+        // Only a grid coarser than docs/conventions.md §3's is worth a word.
         let grid = if d.grid_step_px == MAPPING_GRID_STEP_PX {
             String::new()
         } else {

@@ -1,4 +1,4 @@
-//! The TOML config (SPEC §5): typed, unknown keys rejected, values checked by key.
+//! The TOML config (docs/conventions.md §5): typed, unknown keys rejected, values checked by key.
 pub use crate::app::text::{number, short};
 use crate::error::{Error, Result};
 use crate::model::board::{BoardGeometry, BoardPriors, Method};
@@ -32,7 +32,7 @@ pub struct CalibrationConfig {
     pub function_tolerance: f64,
     pub gradient_tolerance: f64,
     pub parameter_tolerance: f64,
-    /// Corners whose correction fixes the gauge; default: SPEC's corners.
+    /// Corners whose correction fixes the gauge; default: those of docs/conventions.md §2.
     pub gauge_corners: Option<Vec<usize>>,
     /// Print Ceres' per-iteration log and full report (timings) to stderr.
     pub verbose: bool,
@@ -348,7 +348,7 @@ struct RawReference {
     spacing: Option<f64>,
 }
 
-/// `[protocol]`: the evaluation protocol (SPEC §4).
+/// `[protocol]`: the evaluation protocol (docs/conventions.md §4).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(try_from = "RawProtocol")]
 pub struct ProtocolConfig {
@@ -470,7 +470,7 @@ pub enum PhotoPatterns {
 /// Where observations come from.
 #[derive(Debug, Clone, PartialEq)]
 pub enum DataSource {
-    /// Image files in which the board is detected (SPEC §5 Photos).
+    /// Image files in which the board is detected (docs/conventions.md §5 Photos).
     Photos {
         /// The config's folder, which the patterns are relative to.
         base: PathBuf,

@@ -1,4 +1,4 @@
-//! mrgingham's / mrcal's `corners.vnl` corner table (SPEC §5 Interchange): reading
+//! mrgingham's / mrcal's `corners.vnl` corner table (docs/conventions.md §5 Interchange): reading
 //! it into a dataset, with camera patterns for several cameras, and writing one.
 use crate::error::{Error, Result};
 use crate::model::camera::CameraSpec;
@@ -430,7 +430,7 @@ pub struct Table {
     pub files: Vec<ImageName>,
 }
 
-/// Reads a `corners.vnl` (SPEC §5): one row per corner, `filename x y [level|weight]`,
+/// Reads a `corners.vnl` (docs/conventions.md §5): one row per corner, `filename x y [level|weight]`,
 /// `-` for a corner not found, a single `filename - - -` row for an image without a
 /// board, corners in row-major order. Frames are numbered in sorted order of their
 /// time-step keys; returns the dataset and how many images had no board.

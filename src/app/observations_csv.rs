@@ -1,4 +1,4 @@
-//! The observations CSV (SPEC §5, `camera,frame,corner,u,v`): reading with a
+//! The observations CSV (docs/conventions.md §5, `camera,frame,corner,u,v`): reading with a
 //! message naming the line of every problem, and writing.
 use crate::app::fsio::write_atomic;
 use crate::error::{Error, Result};

@@ -1,4 +1,4 @@
-//! The evaluation protocol (SPEC §3–4, the paper's section 4): reference calibration,
+//! The evaluation protocol (docs/conventions.md §3–4, the paper's section 4): reference calibration,
 //! reproducible subsets, every subset × method calibrated and measured, in parallel,
 //! sharded if asked.
 use crate::app::board_json::BoardJson;
@@ -241,7 +241,7 @@ pub struct Row {
     /// The degree-3 and -4 bend terms per image (bend orders 3 and 4 only).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub higher_bends: Vec<HigherBend>,
-    /// The share of the residual the noise does not explain (SPEC §3a).
+    /// The share of the residual the noise does not explain (docs/conventions.md §3a).
     #[serde(default)]
     pub bias_ratio: Option<f64>,
     /// This row is `auto`'s: `method` is the method it chose (see `selection`).
@@ -270,7 +270,7 @@ pub struct CameraRow {
     pub mapping_error_rot_px: Option<f64>,
     pub truth_mapping_error_px: Option<f64>,
     pub truth_mapping_error_rot_px: Option<f64>,
-    /// The mapping error to the truth the noise alone is expected to leave (SPEC §3a).
+    /// The mapping error to the truth the noise alone is expected to leave (docs/conventions.md §3a).
     #[serde(default)]
     pub expected_mapping_error_px: Option<f64>,
     /// The same with the virtual rotation profiled out.

@@ -637,7 +637,7 @@ fn observed(value: Option<f64>, predicted: Option<f64>) -> String {
     }
 }
 
-/// Predicted against observed spread (SPEC §3a): the expected mapping error of
+/// Predicted against observed spread (docs/conventions.md §3a): the expected mapping error of
 /// each subset's calibration beside the mapping errors the subsets actually show.
 fn write_uncertainty(s: &mut String, summary: &Summary, rows: &[Row]) {
     let h = &summary.header;
@@ -680,7 +680,7 @@ fn write_uncertainty(s: &mut String, summary: &Summary, rows: &[Row]) {
     let _ = writeln!(
         s,
         "\nThe expected mapping error is what the detector noise alone leaves between a calibration and the truth \
-         (SPEC §3a); the ratios are observed / predicted. Near 1 to the truth: the noise explains the error. Far above: \
+         (docs/conventions.md §3a); the ratios are observed / predicted. Near 1 to the truth: the noise explains the error. Far above: \
          a bias the model does not capture (a bias ratio above 0.1 says the same from the residuals). Around the mean \
          calibration the subsets' bias is shared and cancels, and subsets that share images scatter less.\n"
     );

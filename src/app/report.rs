@@ -62,7 +62,7 @@ fn rejection_line(c: &Calibration) -> String {
     }
 }
 
-/// The noise, the bias ratio and what it suggests (SPEC §3a).
+/// The noise, the bias ratio and what it suggests (docs/conventions.md §3a).
 fn write_trust(s: &mut String, c: &Calibration) {
     let Some(t) = c.trust(c.detector_noise_px) else {
         return;
@@ -200,7 +200,7 @@ pub fn verdict(sel: &Selection, c: &Calibration) -> String {
 
 /// One line per camera: its size, lens model and intrinsics.
 /// One line per camera: its size, lens model and intrinsics with their 1-σ
-/// uncertainty, then the expected mapping error (SPEC §3a).
+/// uncertainty, then the expected mapping error (docs/conventions.md §3a).
 fn write_cameras(s: &mut String, c: &Calibration) {
     let d = &c.dataset;
     let uncertainty = c.uncertainty();

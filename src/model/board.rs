@@ -1,4 +1,4 @@
-//! Deformation models: the four calibration methods and the per-image paraboloid (SPEC §2).
+//! Deformation models: the four calibration methods and the per-image paraboloid (docs/conventions.md §2).
 use crate::model::target::Target;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -52,7 +52,7 @@ impl Method {
         let (name, frame_params, corner_params, gauge_corners, gauge_dof, tolerance_scale) =
             match self {
                 Method::Standard => ("standard", 0, 0, 0, 0, 1.0),
-                // 7 DOF: two corners fully, the z of a third (SPEC §2). Its solves
+                // 7 DOF: two corners fully, the z of a third (docs/conventions.md §2). Its solves
                 // converge linearly (each step about 0.45 of the one before, on
                 // 25-image t2 sets), so a relative cost change of 1e-8 comes while
                 // the intrinsics still move: one opencv5 set stopped 0.027 px from
@@ -212,7 +212,7 @@ impl Paraboloid {
         self.a * x * x + self.b * y * y + self.c * x * y
     }
 
-    /// `max_out_of_plane_m`: the largest |Δz| over the board's corners (SPEC §3).
+    /// `max_out_of_plane_m`: the largest |Δz| over the board's corners (docs/conventions.md §3).
     pub fn max_out_of_plane(&self, target: &Target) -> f64 {
         target
             .nominal_points()
@@ -263,7 +263,7 @@ pub struct BoardGeometry {
     pub correction_std: Vec<[f64; 3]>,
 }
 
-/// Priors on the board model (beyond the paper, SPEC §2: extra residuals on top of
+/// Priors on the board model (beyond the paper, docs/conventions.md §2: extra residuals on top of
 /// the gauge); every one is off by default, which is the paper's behaviour.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct BoardPriors {

@@ -1,4 +1,4 @@
-//! Observed corners and the dataset a calibration sees (SPEC §5 numbering).
+//! Observed corners and the dataset a calibration sees (docs/conventions.md §5 numbering).
 use crate::model::camera::CameraSpec;
 use crate::model::target::Target;
 use std::collections::HashMap;
@@ -24,7 +24,7 @@ pub struct Dataset {
     pub observations: Vec<Observation>,
 }
 
-/// The CSV header the SPEC fixes.
+/// The CSV header docs/conventions.md §5 fixes.
 pub const HEADER: [&str; 5] = ["camera", "frame", "corner", "u", "v"];
 
 impl Dataset {

@@ -1,4 +1,4 @@
-//! Lens models (SPEC §1): the registry of every model deformcal knows, and
+//! Lens models (docs/conventions.md §1): the registry of every model deformcal knows, and
 //! intrinsics of any of them with projection and unprojection in f64.
 //!
 //! The registry ([`LensModel::ALL`] and [`LensModel::info`]) is the one place a

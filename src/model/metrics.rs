@@ -1,4 +1,4 @@
-//! Calibration quality metrics (SPEC §3): mapping error, with and without a virtual rotation.
+//! Calibration quality metrics (docs/conventions.md §3): mapping error, with and without a virtual rotation.
 use crate::model::lens::Intrinsics;
 use nalgebra::{Matrix3, Rotation3, Vector2, Vector3};
 

@@ -1,4 +1,4 @@
-//! Model selection between board models (SPEC §3a, `method = "auto"`): the
+//! Model selection between board models (docs/conventions.md §3a, `method = "auto"`): the
 //! seeded k-fold split of the frames and the rule that picks a method from the
 //! candidates' held-out errors. Pure arithmetic on per-frame errors; the solves
 //! that produce them live in `solver::select`.
@@ -161,7 +161,7 @@ pub struct Selection {
     /// Largest mapping error between `standard`'s and the chosen intrinsics over
     /// the cameras, px: how far modelling the board moves the projection.
     pub projection_shift_px: f64,
-    /// The same with the virtual rotation profiled out (SPEC §3), px.
+    /// The same with the virtual rotation profiled out (docs/conventions.md §3), px.
     #[serde(default)]
     pub projection_shift_rot_px: f64,
 }

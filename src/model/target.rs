@@ -1,4 +1,4 @@
-//! The chessboard target and its nominal corner grid (SPEC §1).
+//! The chessboard target and its nominal corner grid (docs/conventions.md §1).
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
@@ -54,7 +54,7 @@ impl Target {
         (0..self.num_corners()).map(|i| self.nominal(i)).collect()
     }
 
-    /// The SPEC's default gauge corners: 0, cols−1 and (rows−1)·cols.
+    /// The default (docs/conventions.md §2) gauge corners: 0, cols−1 and (rows−1)·cols.
     pub fn default_gauge(&self) -> [usize; 3] {
         [0, self.cols - 1, (self.rows - 1) * self.cols]
     }

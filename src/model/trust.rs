@@ -137,7 +137,7 @@ pub fn expected_rmse2(noise_px: f64, parameters: usize, residuals: usize) -> f64
 pub fn assess(residuals: &[f64], parameters: usize, noise_px: f64, source: &'static str) -> Trust {
     let n = residuals.len();
     let sum_sq: f64 = residuals.iter().map(|r| r * r).sum();
-    // rmse per point (SPEC §3): Σ‖u − p‖² over N/2 points.
+    // rmse per point (docs/conventions.md §3): Σ‖u − p‖² over N/2 points.
     let rmse2 = sum_sq / (n as f64 / 2.0);
     let expected = expected_rmse2(noise_px, parameters, n);
     let bias_ratio = if rmse2 > 0.0 {

@@ -1,6 +1,6 @@
-//! What a camera's intrinsics covariance Σ_θ means in pixels (SPEC §3a): the
+//! What a camera's intrinsics covariance Σ_θ means in pixels (docs/conventions.md §3a): the
 //! standard deviation of each intrinsic, the expected mapping error to the true
-//! intrinsics (plain, and with the virtual rotation of SPEC §3 profiled out) and the
+//! intrinsics (plain, and with the virtual rotation of docs/conventions.md §3 profiled out) and the
 //! projection-uncertainty map over the image. Pure arithmetic on Σ_θ; computing
 //! Σ_θ from a solve is `solver::uncertainty`'s.
 use crate::model::lens::{Intrinsics, LensModel, MAX_PARAMS};
@@ -40,7 +40,7 @@ pub struct IntrinsicsCovariance {
     pub unit: DMatrix<f64>,
 }
 
-/// A camera's uncertainty figures at a given noise (SPEC §3a, §5).
+/// A camera's uncertainty figures at a given noise (docs/conventions.md §3a, §5).
 #[derive(Debug, Clone, PartialEq)]
 pub struct CameraUncertainty {
     /// σ of each estimated lens parameter (held ones are left out), registry order.
@@ -206,7 +206,7 @@ pub struct UncertaintyMap {
 }
 
 impl UncertaintyMap {
-    /// The centre pixel of cell (column, row); pixel centres are integers (SPEC §1).
+    /// The centre pixel of cell (column, row); pixel centres are integers (docs/conventions.md §1).
     pub fn centre(&self, column: usize, row: usize) -> Vector2<f64> {
         let (w, h) = (self.width as f64, self.height as f64);
         Vector2::new(

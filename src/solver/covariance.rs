@@ -1,4 +1,4 @@
-//! The covariance of a solved problem's intrinsics (SPEC §3a) from the Jacobian
+//! The covariance of a solved problem's intrinsics (docs/conventions.md §3a) from the Jacobian
 //! at its optimum, at unit noise; `solver::uncertainty` scales it to a
 //! calibration's noise and `model::uncertainty` turns it into pixels.
 //!

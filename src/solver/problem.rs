@@ -234,7 +234,7 @@ pub fn underobserved_corners(dataset: &Dataset) -> Vec<usize> {
         .collect()
 }
 
-/// The gauge corners: the requested ones, else the SPEC's defaults, each replaced by
+/// The gauge corners: the requested ones, else the defaults of docs/conventions.md §2, each replaced by
 /// the nearest well-observed corner when the default is seen in fewer than two images.
 pub fn choose_gauge(
     dataset: &Dataset,
@@ -573,7 +573,7 @@ impl PreparedRefit {
     }
 }
 
-/// RMSE over observations of per-point Euclidean residuals (SPEC §3 `rmse_px`).
+/// RMSE over observations of per-point Euclidean residuals (docs/conventions.md §3 `rmse_px`).
 pub fn rmse(residuals: &[f64]) -> f64 {
     let n = residuals.len() / 2;
     if n == 0 {

@@ -1,4 +1,4 @@
-//! The uncertainty of a finished calibration (SPEC §3a): its intrinsics'
+//! The uncertainty of a finished calibration (docs/conventions.md §3a): its intrinsics'
 //! covariance, computed after every solve (`solver::covariance`) at unit noise,
 //! scaled to the noise σ̂ its trust figures use, and the figures in pixels that
 //! `model::uncertainty` derives from it.
@@ -26,7 +26,7 @@ impl Calibration {
         Ok(unit.iter().map(|c| &c.unit * (noise * noise)).collect())
     }
 
-    /// Every camera's uncertainty figures (SPEC §3a) at the noise σ̂.
+    /// Every camera's uncertainty figures (docs/conventions.md §3a) at the noise σ̂.
     pub fn uncertainty(&self) -> Result<Vec<CameraUncertainty>, UncertaintyError> {
         let sigma = self.intrinsics_covariance()?;
         let unit = self.covariance.as_ref().map_err(Clone::clone)?;

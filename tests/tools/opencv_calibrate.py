@@ -7,7 +7,7 @@ MODEL is deformcal's lens model name (default radial3) and picks the OpenCV call
   opencv8  calibrateCamera, CALIB_RATIONAL_MODEL
   kb4      fisheye.calibrate, CALIB_FIX_SKEW | CALIB_RECOMPUTE_EXTRINSIC
 Prints JSON: the model's parameters under deformcal's names (fx fy cx cy k1 ...),
-"rms" (OpenCV's per-point RMS) and "flags". Board points follow SPEC 1 (origin at the
+"rms" (OpenCV's per-point RMS) and "flags". Board points follow docs/conventions.md §1 (origin at the
 board centre, z = 0).
 """
 import csv

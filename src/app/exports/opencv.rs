@@ -1,4 +1,4 @@
-//! OpenCV FileStorage YAML (`opencv.yaml`, SPEC §5): what `cv::FileStorage` and
+//! OpenCV FileStorage YAML (`opencv.yaml`, docs/conventions.md §5): what `cv::FileStorage` and
 //! `calibrateCamera`'s users read.
 use super::{fmt, key_of, unrepresentable};
 use crate::app::calibration_json::{CalibrationJson, CameraJson};
@@ -53,7 +53,7 @@ fn camera_block(prefix: &str, c: &CameraJson, rmse: f64) -> Option<String> {
     Some(s)
 }
 
-/// OpenCV FileStorage YAML (SPEC §5): unprefixed keys for one camera; for several,
+/// OpenCV FileStorage YAML (docs/conventions.md §5): unprefixed keys for one camera; for several,
 /// keys prefixed `<camera>_`, plus `<camera>_R` and `<camera>_T` (camera from camera 0).
 /// `None` when no camera's model can be written; a camera left out adds a warning.
 pub fn opencv_yaml(c: &CalibrationJson, warnings: &mut Vec<String>) -> Option<String> {

@@ -622,7 +622,7 @@ fn correction_block(c: &Calibration) -> Result<String> {
         "The correction Δx_i every corner gets for the whole dataset, in the board frame (x along \
          increasing col, y along increasing row, origin at the board centre). Arrows: the in-plane part \
          (Δx, Δy), drawn ×{}; colour: {colour}. Largest correction: {:.3} mm. Boxed: the gauge corners \
-         {:?}, held to fix the gauge (SPEC §2); crossed: corners seen in fewer than two images, held at zero.",
+         {:?}, held to fix the gauge (docs/conventions.md §2); crossed: corners seen in fewer than two images, held at zero.",
         short(scale),
         largest_correction(c) * 1e3,
         c.gauge

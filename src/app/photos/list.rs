@@ -35,7 +35,7 @@ const META: [char; 6] = ['*', '?', '[', ']', '{', '}'];
 /// Folders deeper than this below the pattern's start are not walked for `**`.
 const MAX_DEPTH: usize = 32;
 
-/// Lists every camera's files and numbers the frames (SPEC §5 Photos): with one
+/// Lists every camera's files and numbers the frames (docs/conventions.md §5 Photos): with one
 /// pattern, frames follow the sorted file names; with one per camera, what the
 /// pattern's wildcards matched is the time step, numbered in sorted order.
 pub fn list_photos(

@@ -1,4 +1,4 @@
-//! Photos in (SPEC §5 Photos): from `[data] photos` to a dataset. Lists the files,
+//! Photos in (docs/conventions.md §5 Photos): from `[data] photos` to a dataset. Lists the files,
 //! detects the board in each in parallel (rayon) with a progress bar, reuses
 //! unchanged images' detections from the cache, checks that enough images are
 //! usable, and writes `detections.csv`, `observations.csv` and the cache into the
@@ -338,7 +338,7 @@ pub fn corner_weight(sigma: f64) -> f64 {
     }
 }
 
-/// `detections.csv` (SPEC §5): file, camera, frame, corners, status, reason.
+/// `detections.csv` (docs/conventions.md §5): file, camera, frame, corners, status, reason.
 pub fn detections_csv(images: &[ImageResult], cameras: &[CameraSpec]) -> String {
     let mut w = csv::Writer::from_writer(Vec::new());
     let _ = w.write_record(["file", "camera", "frame", "corners", "status", "reason"]);
