@@ -343,7 +343,7 @@ fn run_method(config: &Config, dataset: &deformcal::Dataset) -> Result<deformcal
         MethodChoice::Fixed(m) => Ok(calibrate(dataset, &request(m))?),
         MethodChoice::Auto => {
             let auto = AutoSettings::from(c);
-            let folds = auto.folds_for(dataset.num_frames());
+            let folds = deformcal::solver::select::fold_count(dataset.num_frames(), &auto);
             let solves = auto.candidates.len() * (folds + 1);
             let bar = indicatif::ProgressBar::new(solves as u64).with_style(
                 indicatif::ProgressStyle::with_template(

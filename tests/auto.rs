@@ -153,6 +153,16 @@ fn auto_calibrates_small_captures() {
     assert_eq!(sel.candidates.len(), 3);
     assert!(sel.candidates.iter().all(|k| k.cv_rmse_px.is_some()));
     assert!(truth_error(&c, &truth) < 3.0, "{}", truth_error(&c, &truth));
+    // Two folds of five photos would train on two: left out one by one instead.
+    let (d, _) = data(Preset::T2, 5, 10, 1.0, 1.0);
+    let two = AutoSettings {
+        folds: 2,
+        ..AutoSettings::default()
+    };
+    let c = calibrate_auto(&d, &request, &two, &|| {}).expect("5 photos, 2 folds");
+    let sel = c.selection.clone().unwrap();
+    assert_eq!(sel.folds, 5, "{}", sel.reason);
+    assert!(sel.candidates.iter().all(|k| k.cv_rmse_px.is_some()));
     // Three photos calibrate `standard` but leave nothing to cross-validate with.
     let (d, truth) = data(Preset::T2, 3, 9, 1.0, 1.0);
     let c = calibrate_auto(&d, &request, &AutoSettings::default(), &|| {}).expect("3 photos");

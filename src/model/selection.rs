@@ -242,6 +242,15 @@ fn reason(entries: &[(Candidate, Option<HeldOut>)], chosen: usize, best: usize) 
         };
         (100.0 * (1.0 - rmse(i) / rmse(j)), 100.0 * noise)
     };
+    if !rmse(0).is_finite() {
+        return format!(
+            "`{}` could not be cross-validated; `{}` has the lowest cross-validated error \
+             ({:.4} px per corner)",
+            name(0),
+            name(chosen),
+            rmse(chosen)
+        );
+    }
     if chosen == 0 {
         if best == 0 {
             return format!(
@@ -268,7 +277,7 @@ fn reason(entries: &[(Candidate, Option<HeldOut>)], chosen: usize, best: usize) 
     };
     let mut out = format!(
         "{what}: modelling {} (`{}`) predicts the left-out photos {g:.1}% better than a rigid \
-         board (`{}`), beyond the noise (±{noise:.1}%)",
+         board (`{}`; noise ±{noise:.1}%)",
         models(name(chosen)),
         name(chosen),
         name(0)

@@ -958,14 +958,36 @@ fn without_footprint(first: Calibration, request: &Request) -> Result<Calibratio
         },
         ..request.clone()
     };
-    let mut fresh = fit_from(warm_start(&first.dataset, &kept)?, &kept)?;
+    let mut fresh = match warm_start(&first.dataset, &kept).and_then(|w| fit_from(w, &kept)) {
+        Ok(fresh) => fresh,
+        Err(e) => {
+            let mut first = first;
+            first.warnings.push(format!(
+                "the kept observations alone could not be calibrated afresh ({e}); this result \
+                 continues from the fit that still held the rejected ones"
+            ));
+            return Ok(first);
+        }
+    };
     fresh.settings.outlier_k = request.settings.outlier_k;
     fresh.rejected = first.rejected;
     fresh.seconds += first.seconds;
     let mut stages = first.stages;
     stages.append(&mut fresh.stages);
     fresh.stages = stages;
-    let mut warnings = first.warnings;
+    // The first fit's warnings about the data (drops, the share rejected) hold;
+    // those about its solves and priors are the fresh fit's to give.
+    let about_solves = |w: &String| {
+        ["static_prior_mm", "bend_prior_mm", "bend_smoothness"]
+            .iter()
+            .any(|k| w.starts_with(k))
+            || w.contains("solve did not converge")
+    };
+    let mut warnings: Vec<String> = first
+        .warnings
+        .into_iter()
+        .filter(|w| !about_solves(w))
+        .collect();
     for w in fresh.warnings {
         if !warnings.contains(&w) {
             warnings.push(w);

@@ -50,10 +50,22 @@ pub fn check(auto: &AutoSettings) -> Result<()> {
     Ok(())
 }
 
+/// The folds `auto` uses on `frames` frames: [`AutoSettings::folds_for`], and
+/// leave-one-out where a training set (all frames but one fold) would be too
+/// small a calibration of its own.
+pub fn fold_count(frames: usize, auto: &AutoSettings) -> usize {
+    let k = auto.folds_for(frames);
+    if k >= 2 && frames - frames.div_ceil(k) >= MIN_IMAGES {
+        k
+    } else {
+        frames
+    }
+}
+
 /// Whether `frames` frames are enough to cross-validate: every training set
-/// (all frames but one fold) must be a calibration of its own.
+/// (all frames but one) must be a calibration of its own.
 fn can_cross_validate(frames: usize, auto: &AutoSettings) -> bool {
-    let folds = auto.folds_for(frames);
+    let folds = fold_count(frames, auto);
     folds >= 2 && frames - frames.div_ceil(folds) >= MIN_IMAGES
 }
 
@@ -81,7 +93,7 @@ pub fn calibrate_auto_sharing(
 ) -> Result<Calibration> {
     check(auto)?;
     if !can_cross_validate(dataset.num_frames(), auto) {
-        return standard_for_few_frames(dataset, request, auto, warm);
+        return standard_because(dataset, request, auto, warm, &too_few(dataset.num_frames()));
     }
     let fits: Vec<(Method, Result<Calibration>)> = auto
         .candidates
@@ -117,11 +129,19 @@ pub fn calibrate_auto_sharing(
     // Every candidate is cross-validated on the same data: what `standard` kept.
     let cv = &standard.dataset;
     if !can_cross_validate(cv.num_frames(), auto) {
-        return standard_for_few_frames(dataset, request, auto, warm);
+        return standard_because(dataset, request, auto, warm, &too_few(cv.num_frames()));
     }
-    let k = auto.folds_for(cv.num_frames());
+    let k = fold_count(cv.num_frames(), auto);
     let folds = selection::folds(cv.num_frames(), k, auto.seed);
     let held = cross_validate(cv, standard, request, auto, &folds, tick);
+    let scored = |h: &Option<HeldOut>| h.as_ref().map_or(0, |h| h.points.iter().sum::<usize>());
+    if scored(&held[at]) == 0 {
+        let why = format!(
+            "no left-out photo has {MIN_SCORED_OBSERVATIONS} corners or more to judge a bend by, \
+             so the board is taken as rigid (`standard`)"
+        );
+        return standard_because(dataset, request, auto, warm, &why);
+    }
     let order = by_complexity(&fits);
     let mut entries: Vec<(Candidate, Option<HeldOut>)> = order
         .iter()
@@ -153,12 +173,22 @@ pub fn calibrate_auto_sharing(
     Ok(result)
 }
 
-/// `auto` on a capture too small to cross-validate: `standard`, saying why.
-fn standard_for_few_frames(
+/// Why `frames` photos cannot be cross-validated.
+fn too_few(frames: usize) -> String {
+    format!(
+        "{frames} photos are too few to tell a bending board from a rigid one (leaving one out \
+         needs {} photos), so the board is taken as rigid (`standard`)",
+        MIN_IMAGES + 1
+    )
+}
+
+/// `auto` where the data cannot tell the candidates apart: `standard`, saying why.
+fn standard_because(
     dataset: &Dataset,
     request: &Request,
     auto: &AutoSettings,
     warm: &SharedWarmStart,
+    reason: &str,
 ) -> Result<Calibration> {
     let mut c = warm.calibrate(
         dataset,
@@ -173,12 +203,7 @@ fn standard_for_few_frames(
         folds: 0,
         seed: auto.seed,
         candidates: Vec::new(),
-        reason: format!(
-            "{} photos are too few to tell a bending board from a rigid one (leaving one out \
-             needs {} photos), so the board is taken as rigid (`standard`)",
-            c.dataset.num_frames(),
-            MIN_IMAGES + 1
-        ),
+        reason: reason.to_string(),
         projection_shift_px: 0.0,
         projection_shift_rot_px: 0.0,
     });
