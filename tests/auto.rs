@@ -217,3 +217,29 @@ fn auto_meets_its_targets_on_a_slice_of_the_grid() {
     let failures = auto_grid::failures(&outcomes);
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
+
+/// The report says why `auto` chose, and that rejection was off when it was.
+#[test]
+fn the_report_gives_autos_reason_and_says_when_rejection_is_off() {
+    use deformcal::app::html_report::calibration::calibration_page;
+    let (d, _) = data(Preset::T2, 12, 14, 1.0, 1.0);
+    let request = Request {
+        method: Method::Standard,
+        settings: SolverSettings {
+            outlier_k: 0.0,
+            ..SolverSettings::recommended()
+        },
+        gauge: None,
+    };
+    let c = calibrate_auto(&d, &request, &AutoSettings::default(), &|| {}).unwrap();
+    let reason = c.selection.clone().unwrap().reason;
+    let page = calibration_page(&c, &Default::default(), &[]).unwrap();
+    let first_words: String = reason.chars().take(20).collect();
+    assert!(
+        page.contains("chosen by <code>auto</code>: "),
+        "no auto verdict"
+    );
+    assert!(page.contains(&first_words), "{first_words}");
+    assert!(page.contains("Outlier rejection is off"));
+    assert!(!page.contains("beyond 0σ"));
+}

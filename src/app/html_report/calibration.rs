@@ -110,6 +110,12 @@ fn verdicts(c: &Calibration) -> Vec<Verdict> {
             ),
         ));
     }
+    if let Some(sel) = &c.selection {
+        v.push((
+            "ok",
+            format!("Method `{}` chosen by `auto`: {}.", sel.chosen, sel.reason),
+        ));
+    }
     let total = c.dataset.observations.len() + c.rejected.len();
     let fraction = c.rejected.len() as f64 / total.max(1) as f64;
     let class = if fraction > crate::solver::robust::WARN_REJECTED_FRACTION {
@@ -117,15 +123,28 @@ fn verdicts(c: &Calibration) -> Vec<Verdict> {
     } else {
         "ok"
     };
-    v.push((
-        class,
-        format!(
-            "{} of {total} observations ({}%) rejected as outliers (beyond {}σ of their neighbours).",
-            c.rejected.len(),
-            percent(fraction),
-            c.settings.outlier_k
-        ),
-    ));
+    v.push(if c.settings.outlier_k <= 0.0 {
+        (
+            "ok",
+            "Outlier rejection is off (calibration.outlier_k = 0).".to_string(),
+        )
+    } else {
+        (
+            class,
+            format!(
+                "{} of {total} observations ({}%) rejected as outliers (beyond {}σ of their \
+                 neighbours){}.",
+                c.rejected.len(),
+                percent(fraction),
+                c.settings.outlier_k,
+                if c.rejected.is_empty() {
+                    ""
+                } else {
+                    "; the result is a fresh calibration of the observations kept"
+                }
+            ),
+        )
+    });
     for w in &c.warnings {
         v.push(("warn", format!("Warning: {w}")));
     }
