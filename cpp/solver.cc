@@ -50,14 +50,23 @@ constexpr size_t kCornersPerGroup = 4;
 // order makes that order, and so the floating-point result, the same in every
 // run.  The offsets come from the Rust layout and are checked by Validate.
 struct Params {
+  // Room after the caller's values for the correction prior's similarity
+  // (priors.h, at most 7 values): inside the buffer, so that its address keeps
+  // its place among the other blocks'. Ceres orders the blocks of a linear
+  // solver group by address, and a block allocated on its own landed before or
+  // after the others from one solve to the next, so that the same calibration
+  // in one process differed in its last bits.
+  static constexpr size_t kSimilarityRoom = 7;
   std::vector<double> storage;
+  size_t given;  // the caller's values, storage's first ones
   Table frames, corrections;
   std::vector<double*> intrinsics;  // camera k's lens parameters
   std::vector<double*> camera_poses;
   size_t frame_stride;
 
   explicit Params(const ffi::ProblemData& d)
-      : storage(d.params.begin(), d.params.end()), frame_stride(d.frame_stride) {
+      : storage(d.params.begin(), d.params.end()), given(d.params.size()), frame_stride(d.frame_stride) {
+    storage.resize(given + kSimilarityRoom, 0.0);
     for (size_t k = 0; k < d.num_cameras; ++k) {
       intrinsics.push_back(storage.data() + d.intrinsics_offsets[k]);
       camera_poses.push_back(storage.data() + d.camera_poses_offset + kPoseSize * k);
@@ -81,7 +90,11 @@ struct Params {
   }
   static int GroupOffset(size_t i) { return kCorrectionStride * static_cast<int>(i % kCornersPerGroup); }
 
-  void CopyTo(ffi::ProblemData& d) const { std::copy(storage.begin(), storage.end(), d.params.begin()); }
+  double* Similarity() { return storage.data() + given; }
+
+  void CopyTo(ffi::ProblemData& d) const {
+    std::copy(storage.begin(), storage.begin() + static_cast<std::ptrdiff_t>(given), d.params.begin());
+  }
 };
 
 [[noreturn]] void Fail(const std::string& what) { throw std::invalid_argument(what); }
@@ -248,9 +261,9 @@ struct Assembled {
   std::vector<bool> correction_observed, correction_free;
   // The priors' residuals (priors.h): solved with, never reported as observations.
   std::vector<ceres::ResidualBlockId> prior_residuals;
-  // The correction prior's similarity (priors.h): a free block outside the
-  // parameter buffer, solved with the rest and never reported.
-  std::unique_ptr<double[]> similarity;
+  // The correction prior's similarity (priors.h): a free block in Params' room
+  // after the caller's values, solved with the rest and never reported.
+  double* similarity = nullptr;
   bool frames_linked = false;  // a prior ties frame blocks together (no Schur on frames)
   // The robust loss's scale, as a multiple of the configured one (0: no loss):
   // shared with every loss and view block, so that one problem serves the
@@ -686,9 +699,10 @@ void AddCorrectionPrior(const ffi::ProblemData& d, Params& p, Assembled& a) {
   bool any_free = false;
   for (uint32_t c = 0; c < d.num_corners && !any_free; ++c) any_free = free(c);
   if (!any_free) return;
-  a.similarity = std::make_unique<double[]>(SimilaritySize(N));
+  static_assert(SimilaritySize(N) <= Params::kSimilarityRoom, "room for the similarity");
+  a.similarity = p.Similarity();
   // Starts at zero; the prior is linear in it, so any start will do.
-  std::fill(a.similarity.get(), a.similarity.get() + SimilaritySize(N), 0.0);
+  std::fill(a.similarity, a.similarity + SimilaritySize(N), 0.0);
   const double zeros[kCorrectionStride] = {0.0, 0.0, 0.0};
   for (uint32_t c = 0; c < d.num_corners; ++c) {
     const bool gauge = std::find(d.gauge_corners.begin(), d.gauge_corners.end(), c) !=
@@ -700,7 +714,7 @@ void AddCorrectionPrior(const ffi::ProblemData& d, Params& p, Assembled& a) {
         new CorrectionPrior<N>(mean, &d.correction_prior_weight[kCorrectionStride * c], &d.board[3 * c]);
     if (a.corner_groups) prior = new InCornerGroup(prior, 0, Params::GroupOffset(c), p.GroupSize(c));
     a.prior_residuals.push_back(a.Add(
-        prior, nullptr, a.corner_groups ? p.Group(c) : p.Correction(c), a.similarity.get()));
+        prior, nullptr, a.corner_groups ? p.Group(c) : p.Correction(c), a.similarity));
   }
 }
 
@@ -965,7 +979,7 @@ std::vector<double*> FreeLayoutBlocks(const Assembled& a) {
   std::vector<double*> all, out;
   a.problem->GetParameterBlocks(&all);
   for (double* b : all) {
-    if (!a.problem->IsParameterBlockConstant(b) && b != a.similarity.get()) out.push_back(b);
+    if (!a.problem->IsParameterBlockConstant(b) && b != a.similarity) out.push_back(b);
   }
   return out;
 }

@@ -20,7 +20,7 @@ fn config_of(
     methods: &[Method],
 ) -> (Config, ProtocolConfig) {
     let text = format!(
-        "[data]\nsynthetic = \"{preset}\"\n[reference]\nsynthetic = \"reference\"\nimages = {reference_images}\n[calibration]\npriors = \"none\"\n"
+        "[data]\nsynthetic = \"{preset}\"\n[reference]\nsynthetic = \"reference\"\nimages = {reference_images}\n"
     );
     let config = Config::parse(&text, Path::new("test.toml")).unwrap();
     let protocol = ProtocolConfig {
@@ -167,7 +167,7 @@ fn a_failing_reference_fails_the_run_beside_the_subsets() {
 #[test]
 fn protocol_records_the_auto_choice_per_subset() {
     let dir = tempfile::tempdir().unwrap();
-    let text = "[data]\nsynthetic = \"t2\"\n[reference]\nsynthetic = \"reference\"\nimages = 80\n[calibration]\npriors = \"none\"\n\
+    let text = "[data]\nsynthetic = \"t2\"\n[reference]\nsynthetic = \"reference\"\nimages = 80\n\
                 [protocol]\nsubsets = 3\nmethods = [\"standard\", \"dynamic\", \"full\", \"auto\"]\n";
     let config = Config::parse(text, &dir.path().join("c.toml")).unwrap();
     let protocol = config.protocol.clone().unwrap();
@@ -459,7 +459,7 @@ fn cli_shards_merge_into_the_unsharded_outputs() {
     let config = dir.path().join("p.toml");
     std::fs::write(
         &config,
-        "[data]\nsynthetic = \"t2\"\n[reference]\nsynthetic = \"reference\"\nimages = 60\n[calibration]\npriors = \"none\"\n[protocol]\nsubsets = 3\nmethods = [\"standard\", \"dynamic\"]\n[output]\ndir = \"whole\"\n",
+        "[data]\nsynthetic = \"t2\"\n[reference]\nsynthetic = \"reference\"\nimages = 60\n[protocol]\nsubsets = 3\nmethods = [\"standard\", \"dynamic\"]\n[output]\ndir = \"whole\"\n",
     )
     .unwrap();
     let bin = env!("CARGO_BIN_EXE_deformcal");

@@ -60,7 +60,7 @@ fn a_slurm_job_array_shards_and_merges_into_the_unsharded_outputs() {
     let config = dir.path().join("p.toml");
     std::fs::write(
         &config,
-        "[data]\nsynthetic = \"t2\"\n[reference]\nsynthetic = \"reference\"\nimages = 60\n[calibration]\npriors = \"none\"\n[protocol]\nsubsets = 3\nmethods = [\"standard\", \"dynamic\"]\n[output]\ndir = \"whole\"\n",
+        "[data]\nsynthetic = \"t2\"\n[reference]\nsynthetic = \"reference\"\nimages = 60\n[protocol]\nsubsets = 3\nmethods = [\"standard\", \"dynamic\"]\n[output]\ndir = \"whole\"\n",
     )
     .unwrap();
     let bin = env!("CARGO_BIN_EXE_deformcal");
