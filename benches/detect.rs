@@ -129,7 +129,7 @@ fn main() {
     samples.sort();
     if samples.is_empty() {
         println!(
-            "OpenCV sample photos: not cached (run cargo test --release --test opencv_photos)"
+            "OpenCV sample photos: not cached (run cargo test --release --test integration opencv_photos::)"
         );
     } else {
         bench("OpenCV sample photos, 640x480", &samples);

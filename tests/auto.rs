@@ -2,7 +2,7 @@
 //! the board bends, keeps `standard` (or something no worse) where it does not,
 //! and never returns a model whose cross-validated error is worse than
 //! `standard`'s by more than its noise.
-mod common;
+use crate::common;
 use common::*;
 use deformcal::model::metrics::mapping_error;
 use deformcal::model::selection::{AutoSettings, Selection};

@@ -1,7 +1,7 @@
 //! Issue 15, beyond the paper's board model: the static prior, richer bends,
 //! temporal smoothness, `board.json` and board health, on synthetic truth. Quick
 //! variants; `cargo bench --bench board` runs the full experiments.
-mod common;
+use crate::common;
 use common::truth_error;
 use deformcal::app::board_json;
 use deformcal::app::config::{BendOrder, Config};

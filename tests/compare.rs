@@ -2,7 +2,7 @@
 //! difference their uncertainties predict. Two independent calibrations of the
 //! same rigid-board camera differ by about what the noise explains; `standard`
 //! against `dynamic` on bending boards differs by far more.
-mod common;
+use crate::common;
 use common::*;
 use deformcal::app::calibration_json::CalibrationJson;
 use deformcal::app::compare::{compare, REAL_DIFFERENCE_FACTOR};

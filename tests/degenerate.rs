@@ -1,6 +1,6 @@
 //! Degenerate data is detected and explained, never turned into a silent result;
 //! outliers are held off by the Cauchy loss and reported.
-mod common;
+use crate::common;
 use common::*;
 use deformcal::app::calibration_json::CalibrationJson;
 use deformcal::model::metrics::mapping_error_rot;

@@ -1,6 +1,6 @@
 //! Detection against rendered ground truth: accuracy ≤ 0.1 px RMS, correct
 //! indexing, partial views, ambiguity and failure reasons.
-mod detect_common;
+use crate::detect_common;
 
 use deformcal::app::detect::render::render_board;
 use deformcal::app::detect::{detect_image, Detector, Rejection};

@@ -1,5 +1,5 @@
 //! The calibration engine against synthetic ground truth.
-mod common;
+use crate::common;
 use common::*;
 use deformcal::model::synthetic::Preset;
 use deformcal::solver::problem::Loss;

@@ -3,7 +3,7 @@
 //! agree with ours to 1e-6 px, the stereo rectification equals `cv2.stereoRectify`,
 //! Kalibr's chain transform equals the calibrated pose, and every camera a format
 //! cannot hold is left out with exactly the warning the user sees.
-mod common;
+use crate::common;
 use common::{python_has, run_tool};
 use deformcal::app::calibration_json::{CalibrationJson, CameraJson};
 use deformcal::app::exports::OptimizationInputs;

@@ -1,7 +1,7 @@
 //! Interchange: exports read back by the real OpenCV and mrcal (for every lens model,
 //! and a rig), mrcal's own projection against ours, corners.vnl in, and corners found
 //! by the real mrgingham on rendered images.
-mod common;
+use crate::common;
 use common::{exact_settings, python_has, run_tool};
 use deformcal::app::calibration_json::CalibrationJson;
 use deformcal::app::corners_vnl::write_corners_vnl;

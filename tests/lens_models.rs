@@ -2,7 +2,7 @@
 //! chained Jacobian against autodiff, the four methods on rigid and bending
 //! boards against the synthetic truth, a rig of two different models, fixed
 //! parameters, and the protocol.
-mod common;
+use crate::common;
 use common::*;
 use deformcal::model::metrics::mapping_error_rot;
 use deformcal::model::synthetic::{true_intrinsics_of, Generator, Preset, Truth};
@@ -399,7 +399,7 @@ impl Ratios {
 
 /// The experiment behind [`allowed`]: the ratios of the bending-board test over
 /// more seeds, with board priors and fixed lens terms to compare
-/// (`cargo test --release --test lens_models -- --ignored --nocapture`;
+/// (`cargo test --release --test integration -- --ignored --nocapture`;
 /// env `LENS_SEEDS`, `LENS_MODELS`, `LENS_STATIC_MM`, `LENS_BEND_MM`,
 /// `LENS_BEND_AUTO` (`bend_prior_mm = "auto"`), `LENS_STATIC_AUTO`
 /// (`static_prior_mm = "auto"`), `LENS_PRIOR` (σ, or `none`), `LENS_FIX`,

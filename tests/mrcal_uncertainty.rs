@@ -3,7 +3,7 @@
 //! robust optimum as its own weighted least-squares optimum, and its uncertainty
 //! and diff tools run on our models. Where mrcal cannot represent the problem the
 //! file says why and carries none. Skips, saying so, without mrcal.
-mod common;
+use crate::common;
 use common::{python_has, run_tool};
 use deformcal::app::exports::NOT_IN_CALIBRATION_JSON;
 use deformcal::app::output::write_calibration;

@@ -3,7 +3,7 @@
 //! CALIB_ZERO_TANGENT_DIST), opencv5 (default flags), opencv8 (CALIB_RATIONAL_MODEL)
 //! and kb4 (cv::fisheye::calibrate with CALIB_FIX_SKEW | CALIB_RECOMPUTE_EXTRINSIC).
 //! Both tools minimise the same sum of squares, so they must find the same camera.
-mod common;
+use crate::common;
 use common::*;
 use deformcal::model::metrics::{mapping_error, mapping_error_rot};
 use deformcal::model::synthetic::{Generator, Preset, Truth};

@@ -2,8 +2,8 @@
 //! rendered photos: the corners' true positions are known, so their detection
 //! error is measured directly and σ̂ (from the calibration's residuals, with the
 //! corner refinement's per-corner σ as relative weights) must match it.
-mod common;
-mod detect_common;
+use crate::common;
+use crate::detect_common;
 
 use common::run;
 use deformcal::app::detect::detect_image;

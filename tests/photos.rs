@@ -2,7 +2,7 @@
 //! photos of a 9×6 board through a known camera → `deformcal --config` → intrinsics
 //! close to the truth; detections.csv, the cache on a rerun, non-image files
 //! skipped, several cameras with PNG 16 bit, TIFF and JPEG, and `deformcal detect`.
-mod detect_common;
+use crate::detect_common;
 
 use deformcal::app::detect::render::render_board;
 use detect_common::*;

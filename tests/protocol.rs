@@ -1,6 +1,5 @@
 //! The evaluation protocol: reproducibility, sharding, and the paper's findings on
 //! the synthetic presets (quick variants of configs/protocol_*.toml).
-mod common;
 use deformcal::app::config::{Config, ProtocolConfig};
 use deformcal::app::protocol::{
     draw_subsets, merge, plan, prepare, test_rmse, Setup, Shard, ShardFile, TestError,

@@ -2,7 +2,7 @@
 //! rejecting observations is the calibration of the observations it kept, for
 //! every method and lens model, and with 3 % gross outliers on a bending board
 //! every method stays near its clean result.
-mod common;
+use crate::common;
 use common::*;
 use deformcal::model::lens::LensModel;
 use deformcal::model::metrics::mapping_error;

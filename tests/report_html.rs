@@ -3,7 +3,7 @@
 //! logs nothing to the console, refers to no file or network resource, and a
 //! screenshot is saved. Without chromium the browser checks are skipped, with the
 //! reason printed; the checks on the file itself always run.
-mod common;
+use crate::common;
 
 use deformcal::app::html_report;
 use deformcal::app::lint::FrameFiles as FrameLabels;

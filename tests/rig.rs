@@ -1,5 +1,5 @@
 //! Several cameras: rig poses, per-camera intrinsics, shared deformation.
-mod common;
+use crate::common;
 use common::*;
 use deformcal::model::synthetic::{Generator, Preset, Truth};
 use deformcal::solver::problem::Loss;

@@ -1,7 +1,7 @@
 //! Issue 19: no abort, no hang, no half-written output, no confident wrong answer.
 //! Each test names the item of the issue it checks; the config-only items are
 //! cases of tests/bad_inputs.
-mod common;
+use crate::common;
 use common::*;
 use deformcal::app::fsio::OutputSet;
 use deformcal::app::output;

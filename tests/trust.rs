@@ -1,6 +1,6 @@
 //! The bias ratio against synthetic truth: noise explains the residual of a model
 //! that fits the board, and not that of one that cannot follow its bend.
-mod common;
+use crate::common;
 use common::*;
 use deformcal::model::synthetic::Preset;
 use deformcal::solver::problem::Loss;

@@ -2,7 +2,7 @@
 //! standard deviations and expected mapping error match the spread that new data
 //! of the same kind actually produce; the covariance does not depend on the gauge;
 //! the figures survive `calibration.json`.
-mod common;
+use crate::common;
 use deformcal::app::calibration_json::CalibrationJson;
 use deformcal::model::metrics::{mapping_error, mapping_error_rot};
 use deformcal::model::synthetic::{Generator, Preset};
