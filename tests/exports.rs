@@ -190,7 +190,9 @@ fn expected_warnings(cam: &CameraJson) -> Vec<String> {
         ));
     }
     if model == LensModel::OpenCv8 {
-        w.push(format!("camchain.yaml: camera `{name}` is left out: Kalibr has no rational (`opencv8`) lens model"));
+        w.push(format!(
+            "camchain.yaml: camera `{name}` is left out: the format has no `opencv8` lens model"
+        ));
     }
     if model == LensModel::DoubleSphere {
         w.push(format!(

@@ -264,24 +264,12 @@ pub fn true_intrinsics() -> Intrinsics {
     true_intrinsics_of(LensModel::Radial3)
 }
 
-/// The simulated camera (1936 × 1216 pixels) under each lens model: the 17 mm
-/// lens for `radial3` and `opencv5` (with tangential terms), a 112° (diagonal)
-/// wide-angle lens for `opencv8` (whose rational terms a narrow lens cannot
-/// determine), a fisheye whose image corners lie about 95° off axis for `kb4`,
-/// and a lens of over 190° for `ds`, whose image circle just cuts the corners.
+/// The simulated camera (1936 × 1216 pixels) under each lens model: the
+/// registry's `synthetic` parameters (the 17 mm lens for `radial3` and
+/// `opencv5`, wide-angle and fisheye lenses for the others; each model's file in
+/// `model::lens` says which).
 pub fn true_intrinsics_of(model: LensModel) -> Intrinsics {
-    let p: &[f64] = match model {
-        LensModel::Radial3 => &[2901.0, 2899.5, 975.3, 601.8, -0.11, 0.14, -0.05],
-        LensModel::OpenCv5 => &[
-            2901.0, 2899.5, 975.3, 601.8, -0.11, 0.14, 1.2e-3, -8e-4, -0.05,
-        ],
-        LensModel::OpenCv8 => &[
-            1100.0, 1099.4, 975.3, 601.8, 0.1, 0.01, 1.2e-3, -8e-4, 5e-4, 0.3, 0.03, 1e-3,
-        ],
-        LensModel::Kb4 => &[690.0, 689.2, 971.6, 606.4, 0.02, -0.012, 0.004, -6e-4],
-        LensModel::DoubleSphere => &[520.0, 519.4, 971.6, 606.4, -0.18, 0.61],
-    };
-    Intrinsics::from_params(model, p).expect("parameter count of the model")
+    Intrinsics::from_params(model, model.info().synthetic).expect("parameter count of the model")
 }
 
 /// Ground truth of a generated dataset.
