@@ -161,6 +161,8 @@ fn expected_formats(
             Some("OPENCV_FISHEYE"),
         ),
         LensModel::DoubleSphere => (None, Some("none"), None),
+        // Every distortion coefficient 0.
+        LensModel::Pinhole => (Some("plumb_bob"), Some("radtan"), Some("PINHOLE")),
     }
 }
 

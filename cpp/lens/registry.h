@@ -13,6 +13,7 @@
 #include "deformcal/cpp/lens/kb4.h"
 #include "deformcal/cpp/lens/opencv5.h"
 #include "deformcal/cpp/lens/opencv8.h"
+#include "deformcal/cpp/lens/pinhole.h"
 #include "deformcal/cpp/lens/radial3.h"
 
 namespace deformcal {
@@ -50,6 +51,7 @@ bool DispatchLens(const std::string& name, F&& f) {
   try_one(OpenCv8{});
   try_one(Kb4{});
   try_one(DoubleSphere{});
+  try_one(Pinhole{});
   return found;
 }
 

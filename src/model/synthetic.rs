@@ -239,20 +239,15 @@ pub fn rig_intrinsics(k: usize) -> Intrinsics {
 pub fn rig_intrinsics_of(model: LensModel, k: usize) -> Intrinsics {
     let mut i = true_intrinsics_of(model);
     let k = k as f64;
-    // The first distortion coefficient of each model varies a little too.
-    let first = model.param_names()[4];
+    // The first distortion coefficient of each model (if it has one) varies a little too.
+    let first = model.param_names().get(4).copied();
     let step = if model.info().pinhole_like {
         0.01
     } else {
         0.002
     };
-    for (name, delta) in [
-        ("fx", 7.0),
-        ("fy", 5.0),
-        ("cx", -4.0),
-        ("cy", 3.0),
-        (first, step),
-    ] {
+    let core = [("fx", 7.0), ("fy", 5.0), ("cx", -4.0), ("cy", 3.0)];
+    for (name, delta) in core.into_iter().chain(first.map(|f| (f, step))) {
         let v = i.get(name).expect("parameter of the model");
         i.set(name, v + delta * k);
     }

@@ -19,6 +19,7 @@ mod model;
 mod opencv5;
 mod opencv8;
 mod opencv_family;
+mod pinhole;
 mod pinhole_like;
 mod projection;
 mod radial3;

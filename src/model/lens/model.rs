@@ -20,16 +20,19 @@ pub enum LensModel {
     Kb4,
     /// Double sphere (Usenko et al. 2018), beyond 180°.
     DoubleSphere,
+    /// A pinhole camera without distortion.
+    Pinhole,
 }
 
 impl LensModel {
     /// Every registered model.
-    pub const ALL: [LensModel; 5] = [
+    pub const ALL: [LensModel; 6] = [
         LensModel::Radial3,
         LensModel::OpenCv5,
         LensModel::OpenCv8,
         LensModel::Kb4,
         LensModel::DoubleSphere,
+        LensModel::Pinhole,
     ];
 
     /// The config name.

@@ -2,7 +2,7 @@
 //! arm the `INFO` of the model's own file.
 use super::info::LensInfo;
 use super::model::LensModel;
-use super::{ds, kb4, opencv5, opencv8, radial3};
+use super::{ds, kb4, opencv5, opencv8, pinhole, radial3};
 
 impl LensModel {
     /// The registry entry: the one match on the model, each arm the model's own file.
@@ -13,6 +13,7 @@ impl LensModel {
             LensModel::OpenCv8 => &opencv8::INFO,
             LensModel::Kb4 => &kb4::INFO,
             LensModel::DoubleSphere => &ds::INFO,
+            LensModel::Pinhole => &pinhole::INFO,
         }
     }
 }
