@@ -26,7 +26,10 @@ def load(path):
         for line in f:
             line = line.strip()
             if line:
-                cases.append(json.loads(line))
+                case = json.loads(line)
+                # A failed candidate's error is written as null (infinite).
+                case["errors"] = [math.inf if e is None else e for e in case["errors"]]
+                cases.append(case)
     return cases
 
 
