@@ -10,6 +10,7 @@ use deformcal::model::synthetic::{Preset, Truth};
 use deformcal::solver::problem::SolverSettings;
 use deformcal::solver::select::calibrate_auto;
 use deformcal::{Calibration, Dataset, Method, Request};
+use rayon::prelude::*;
 
 /// `auto` as a config without `[calibration]` keys runs it (board priors estimated).
 fn auto(d: &Dataset) -> Calibration {
@@ -175,9 +176,14 @@ fn auto_calibrates_small_captures() {
 }
 
 /// A slice of the evaluation grid (`cargo bench --bench auto_grid` runs all of
-/// it): `auto` with the default settings stays within the targets: regret at most
-/// 1.3, at most 10 % worse than `standard` on a rigid board, never `standard`
-/// where `standard` is twice as far from the true lens as the best candidate.
+/// it), on seeds used neither to fit the rule's threshold (1-3) nor by the grid
+/// (100, 200): `auto` with the default settings stays within the targets: at
+/// most 10 % worse than `standard` on a rigid board, never `standard` where
+/// `standard` is twice as far from the true lens as the best candidate, median
+/// regret at most 1.05; and regret at most 1.3 on the 25-photo cases. Small
+/// captures of 8 and 12 photos (left out one at a time) of every kind of board
+/// are held to all but the last: on the grid no rule, not even one that knows
+/// the kind of board, keeps every case's regret under 1.3 (docs/benchmarks.md).
 #[test]
 fn auto_meets_its_targets_on_a_slice_of_the_grid() {
     use common::auto_grid::{self, Board, Case};
@@ -199,12 +205,33 @@ fn auto_meets_its_targets_on_a_slice_of_the_grid() {
             });
         }
     }
-    let outcomes: Vec<_> = cases.into_iter().map(auto_grid::run).collect();
+    for (board, print_mm) in [
+        (Board::Rigid, 0.0),
+        (Board::Paraboloid(2.0), 0.0),
+        (Board::Twist(2.0), 0.0),
+        (Board::Plate(2.0), 0.2),
+    ] {
+        for (frames, model, noise_px, seed) in [
+            (8, LensModel::Radial3, 0.1, 7),
+            (12, LensModel::OpenCv5, 0.3, 8),
+        ] {
+            cases.push(Case {
+                board,
+                print_mm,
+                frames,
+                noise_px,
+                model,
+                seed,
+            });
+        }
+    }
+    let outcomes: Vec<_> = cases.into_par_iter().map(auto_grid::run).collect();
     eprint!("{}", auto_grid::table(&outcomes));
     for o in &outcomes {
         eprintln!(
-            "{} {:?}: chose {} ({:.3} px; standard {:.3}, dynamic {:.3}, full {:.3}) — {}",
+            "{} {} frames {:?}: chose {} ({:.3} px; standard {:.3}, dynamic {:.3}, full {:.3}) — {}",
             o.case.board.label(),
+            o.case.frames,
             o.case.model,
             o.chosen,
             o.error_of(o.chosen),
@@ -214,8 +241,18 @@ fn auto_meets_its_targets_on_a_slice_of_the_grid() {
             o.reason
         );
     }
-    let failures = auto_grid::failures(&outcomes);
+    let small = |o: &auto_grid::Outcome| o.case.frames < 25;
+    let (small_captures, at_25): (Vec<_>, Vec<_>) = outcomes.iter().cloned().partition(small);
+    let failures = auto_grid::failures(&at_25);
     assert!(failures.is_empty(), "{}", failures.join("\n"));
+    let failures: Vec<String> = auto_grid::failures(&small_captures)
+        .into_iter()
+        .filter(|f| !f.starts_with("regret"))
+        .collect();
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+    let mut regret: Vec<f64> = outcomes.iter().map(|o| o.regret()).collect();
+    regret.sort_by(f64::total_cmp);
+    assert!(regret[regret.len() / 2] <= 1.05, "{regret:?}");
 }
 
 /// The report says why `auto` chose, and that rejection was off when it was.

@@ -46,6 +46,10 @@ pub enum BendShape {
     Warped,
     /// A paraboloid whose coefficients drift smoothly with the frame index (video).
     Smooth,
+    /// A twist, per image: the board held by two opposite corners and turned, the
+    /// x·y term of the paraboloid leading, with the degree-4 twist terms x³y and
+    /// x·y³ and a little of the paraboloid's own curvature on top.
+    Twisted,
 }
 
 /// What a preset generates.
@@ -502,6 +506,20 @@ impl Generator {
                     *c = 1.5 * n.sample(rng) / h.powi(degree - 2);
                 }
                 shape.c = n.sample(rng);
+            }
+            BendShape::Twisted => {
+                // In units of the board's half size, as for `Warped`; the sign of
+                // the twist is random, its size not.
+                let h = (s.target.cols.max(s.target.rows) as f64 - 1.0) / 2.0 * s.target.spacing;
+                let sign = if rng.gen::<bool>() { 1.0 } else { -1.0 };
+                shape = Paraboloid {
+                    a: 0.2 * n.sample(rng),
+                    b: 0.2 * n.sample(rng),
+                    c: sign * (1.0 + 0.2 * n.sample(rng)),
+                };
+                // x³y and x·y³ in `HigherBend`'s order (x³, x²y, xy², y³, x⁴, x³y, …).
+                higher[5] = 0.5 * n.sample(rng) / (h * h);
+                higher[7] = 0.5 * n.sample(rng) / (h * h);
             }
             BendShape::Smooth => {
                 // Slow drifts, periods of 60 to 150 frames: a board flexing in the hands.
