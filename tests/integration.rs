@@ -4,10 +4,12 @@
 mod common;
 mod detect_common;
 
+mod advise;
 mod auto;
 mod bad_inputs;
 mod board;
 mod capi;
+mod charuco;
 mod cli;
 mod compare;
 mod cpp_example;
@@ -26,6 +28,7 @@ mod opencv;
 mod opencv_photos;
 mod photo_noise;
 mod photos;
+mod printable;
 mod protocol;
 mod python;
 mod real_stereo;

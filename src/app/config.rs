@@ -416,25 +416,8 @@ impl TryFrom<RawProtocol> for ProtocolConfig {
     }
 }
 
-/// `[target]`: the board, and optionally a measured board (`board.json`).
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawTarget {
-    rows: usize,
-    cols: usize,
-    spacing: f64,
-    geometry: Option<PathBuf>,
-}
-
-impl RawTarget {
-    fn target(&self) -> Target {
-        Target {
-            rows: self.rows,
-            cols: self.cols,
-            spacing: self.spacing,
-        }
-    }
-}
+// `[target]`: the board, and optionally a measured board (`board.json`).
+use crate::app::target_config::TargetSection as RawTarget;
 
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -505,6 +488,8 @@ pub struct ReferenceConfig {
 pub struct Config {
     pub path: PathBuf,
     pub target: Target,
+    /// `[target] type = "charuco"`: the ChArUco board the photos show.
+    pub charuco: Option<crate::app::detect::charuco::CharucoSpec>,
     pub cameras: Vec<CameraSpec>,
     pub data: DataSource,
     pub reference: Option<ReferenceConfig>,
@@ -1014,6 +999,9 @@ impl Checker<'_> {
     }
 
     fn check(&self, mut raw: RawConfig) -> Result<Config> {
+        if let Some(t) = &raw.target {
+            t.check().map_err(|m| self.err(m))?;
+        }
         let data = match raw.data.corners_vnl {
             _ if raw.data.photos.is_some() => self.photos(&raw.data)?,
             Some(vnl) => {
@@ -1096,6 +1084,7 @@ impl Checker<'_> {
         Ok(Config {
             path: self.path.into(),
             target,
+            charuco: raw.target.as_ref().and_then(RawTarget::charuco),
             cameras,
             data,
             reference,

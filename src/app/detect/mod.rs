@@ -50,6 +50,7 @@
 //! - [`render`]: the synthetic-board renderer (public so the integration
 //!   tests and the benchmark can draw photos with known truth).
 
+pub mod charuco;
 pub mod load;
 pub mod orient;
 pub mod refine;
@@ -135,6 +136,9 @@ pub struct Detector {
     /// Fewest corners a detection may have (default 6, and never more than
     /// rows·cols).
     pub min_corners: usize,
+    /// A ChArUco board to find instead of a chessboard (`charuco`); rows and
+    /// cols given to the detect methods are then the board's inner corners.
+    pub charuco: Option<charuco::CharucoSpec>,
 }
 
 impl Default for Detector {
@@ -142,6 +146,7 @@ impl Default for Detector {
         Detector {
             max_pixels: 100_000_000,
             min_corners: 6,
+            charuco: None,
         }
     }
 }
@@ -165,7 +170,10 @@ impl Detector {
         rows: usize,
         cols: usize,
     ) -> Result<Detection, Rejection> {
-        pipeline::detect(self, img, rows, cols)
+        match &self.charuco {
+            Some(spec) => charuco::detect(self, spec, img),
+            None => pipeline::detect(self, img, rows, cols),
+        }
     }
 }
 

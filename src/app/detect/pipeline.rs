@@ -86,7 +86,11 @@ pub(crate) fn detect(
 /// board edge inside the window drags cornerSubPix off the junction. A
 /// smaller window is tried before giving up, which rescues corners next to a
 /// thin outer row of squares.
-fn refine_checked(img: &FloatImage, start: [f64; 2], half: usize) -> Option<refine::Refined> {
+pub(crate) fn refine_checked(
+    img: &FloatImage,
+    start: [f64; 2],
+    half: usize,
+) -> Option<refine::Refined> {
     let first = refine::refine_corner(img, start, half);
     if let Some(r) = first.filter(|r| r.asymmetry <= MAX_ASYMMETRY) {
         return Some(r);
@@ -128,7 +132,7 @@ fn find_grid(gray: &image::GrayImage) -> Result<Option<(Vec<Labelled>, f64)>, Re
 /// For a Gaussian-blurred step, range / max gradient = σ·√(2π); we call the
 /// image blurred when that exceeds ~10 px (σ ≳ 4 px), which is where the ChESS
 /// detector stops responding.
-fn classify_miss(f: &FloatImage) -> Rejection {
+pub(crate) fn classify_miss(f: &FloatImage) -> Rejection {
     let (w, h) = (f.width, f.height);
     let mut grads = Vec::with_capacity(w * h / 4);
     for y in (1..h - 1).step_by(2) {

@@ -74,16 +74,29 @@ pub struct Scene {
     pub supersample: u32,
 }
 
-const DARK: f64 = 30.0;
-const LIGHT: f64 = 220.0;
-const BACKGROUND: f64 = 110.0;
+/// Grey level of the board's dark squares.
+pub const DARK: f64 = 30.0;
+/// Grey level of the board's light squares and margin.
+pub const LIGHT: f64 = 220.0;
+/// Grey level of everything that is not the board.
+pub const BACKGROUND: f64 = 110.0;
 
 /// Render `scene`; returns the 8-bit image and, per inner corner index, its
 /// true pixel position (None when it projects outside the image or behind
 /// the camera).
 pub fn render_board(scene: &Scene) -> (GrayImage, Vec<Option<[f64; 2]>>) {
+    render_with_albedo(scene, &|bx, by| board_albedo(scene, bx, by))
+}
+
+/// [`render_board`] with another printed pattern: `albedo(bx, by)` is the grey
+/// level (0..255) at board point (bx, by) in the board frame above (a ChArUco
+/// board's, for example); the truth is still the scene's inner corners.
+pub fn render_with_albedo(
+    scene: &Scene,
+    albedo: &(dyn Fn(f64, f64) -> f64 + Sync),
+) -> (GrayImage, Vec<Option<[f64; 2]>>) {
     let rot = rodrigues(scene.pose.rvec);
-    let mut buf = sample_image(scene, &rot);
+    let mut buf = sample_image(scene, &rot, albedo);
     if scene.blur > 0.0 {
         gaussian_blur(
             &mut buf,
@@ -116,7 +129,11 @@ fn truth(scene: &Scene, rot: &[[f64; 3]; 3]) -> Vec<Option<[f64; 2]>> {
         .collect()
 }
 
-fn sample_image(scene: &Scene, rot: &[[f64; 3]; 3]) -> Vec<f64> {
+fn sample_image(
+    scene: &Scene,
+    rot: &[[f64; 3]; 3],
+    albedo: &(dyn Fn(f64, f64) -> f64 + Sync),
+) -> Vec<f64> {
     let n = scene.supersample.max(1);
     let inv_n = 1.0 / n as f64;
     let mut out = Vec::with_capacity(scene.width as usize * scene.height as usize);
@@ -126,10 +143,10 @@ fn sample_image(scene: &Scene, rot: &[[f64; 3]; 3]) -> Vec<f64> {
             // inside one region (squares are many pixels wide), so only
             // pixels straddling an edge pay for the full n×n supersampling.
             let (xf, yf) = (x as f64, y as f64);
-            let centre = shade(scene, rot, xf, yf);
+            let centre = shade(scene, rot, albedo, xf, yf);
             let uniform = [(-0.5, -0.5), (0.5, -0.5), (-0.5, 0.5), (0.5, 0.5)]
                 .iter()
-                .all(|(dx, dy)| shade(scene, rot, xf + dx, yf + dy) == centre);
+                .all(|(dx, dy)| shade(scene, rot, albedo, xf + dx, yf + dy) == centre);
             if uniform {
                 out.push(centre);
                 continue;
@@ -139,7 +156,7 @@ fn sample_image(scene: &Scene, rot: &[[f64; 3]; 3]) -> Vec<f64> {
                 for sx in 0..n {
                     let u = xf + (sx as f64 + 0.5) * inv_n - 0.5;
                     let v = yf + (sy as f64 + 0.5) * inv_n - 0.5;
-                    acc += shade(scene, rot, u, v);
+                    acc += shade(scene, rot, albedo, u, v);
                 }
             }
             out.push(acc * inv_n * inv_n);
@@ -149,7 +166,13 @@ fn sample_image(scene: &Scene, rot: &[[f64; 3]; 3]) -> Vec<f64> {
 }
 
 /// Grey level seen along the ray through pixel position (u, v).
-fn shade(scene: &Scene, rot: &[[f64; 3]; 3], u: f64, v: f64) -> f64 {
+fn shade(
+    scene: &Scene,
+    rot: &[[f64; 3]; 3],
+    albedo: &(dyn Fn(f64, f64) -> f64 + Sync),
+    u: f64,
+    v: f64,
+) -> f64 {
     let cam = &scene.camera;
     let (xd, yd) = ((u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy);
     let Some((x, y)) = undistort(cam, xd, yd) else {
@@ -176,7 +199,7 @@ fn shade(scene: &Scene, rot: &[[f64; 3]; 3], u: f64, v: f64) -> f64 {
         by = o[1] + s * d[1];
         z0 = bend_z(scene, bx);
     }
-    board_albedo(scene, bx, by)
+    albedo(bx, by)
 }
 
 fn board_albedo(scene: &Scene, bx: f64, by: f64) -> f64 {
