@@ -15,8 +15,9 @@
 //!    labelling) finds and labels the grid; it is robust to partial views,
 //!    blur and distortion but only ~0.2 px accurate.
 //! 3. [`refine`]: cornerSubPix-style gradient-orthogonality refinement on the
-//!    full-precision image, with a window of 0.4× each corner's own spacing to
-//!    its neighbours, which also yields each corner's uncertainty. A
+//!    full-precision image (window 0.3× the cell, shrunk to 0.4× a corner's own
+//!    spacing where its squares are compressed), which also yields each
+//!    corner's uncertainty. A
 //!    corner whose refined window is not point-symmetric (occluder, clutter
 //!    or board edge in the window) is retried with half the window and
 //!    dropped if still asymmetric: a missing corner is harmless, a wrong one

@@ -75,15 +75,21 @@ pub(crate) fn detect(
     })
 }
 
-/// Refine every found corner with a window sized to its own spacing to its
-/// neighbours (the board's mean cell size would swallow the compressed
-/// squares near a fisheye's rim), dropping those that fail the checks.
+/// Refine every found corner, with a window shrunk to 0.4× its own spacing to
+/// its neighbours where that is smaller than the board-wide one (which would
+/// swallow the compressed squares near a fisheye's rim), dropping those that
+/// fail the checks.
 fn refine_all(fimg: &FloatImage, raw: Vec<Labelled>, cell: f64) -> Vec<Labelled> {
     let at: HashMap<(i32, i32), [f64; 2]> = raw.iter().map(|c| ((c.u, c.v), c.uv)).collect();
     raw.into_iter()
         .filter_map(|c| {
+            // The board-wide window (0.3× the cell) unless this corner's own
+            // spacing asks for a smaller one: a larger window than that loses
+            // accuracy on ordinary boards (tests/photo_noise.rs).
+            let board_wide = ((0.3 * cell).round() as usize).clamp(3, 12);
             let spacing = grow::local_spacing((c.u, c.v), &at).unwrap_or(cell);
-            let r = refine_checked(fimg, c.uv, grow::half_window(spacing))?;
+            let half = board_wide.min(grow::half_window(spacing));
+            let r = refine_checked(fimg, c.uv, half)?;
             Some(Labelled {
                 uv: r.uv,
                 sigma: r.sigma,
