@@ -7,6 +7,7 @@ use common::*;
 use deformcal::model::metrics::mapping_error;
 use deformcal::model::selection::{AutoSettings, Selection};
 use deformcal::model::synthetic::{Preset, Truth};
+use deformcal::solver::calibrate::MIN_IMAGES;
 use deformcal::solver::problem::SolverSettings;
 use deformcal::solver::select::calibrate_auto;
 use deformcal::{Calibration, Dataset, Method, Request};
@@ -173,6 +174,39 @@ fn auto_calibrates_small_captures() {
     let standard = run_with(&d, Method::Standard, SolverSettings::recommended());
     assert_eq!(c.state.intrinsics, standard.state.intrinsics);
     assert!(truth_error(&c, &truth).is_finite());
+}
+
+/// Every capture that `standard` calibrates (3 photos and up) gets an answer from
+/// `auto`: below the default folds' ten photos each photo is left out in turn, and
+/// with too few to leave one out it keeps `standard`.
+#[test]
+fn auto_answers_every_capture_from_three_to_nine_photos() {
+    let request = Request {
+        method: Method::Standard,
+        settings: SolverSettings::recommended(),
+        gauge: None,
+    };
+    for n in 3..=9 {
+        let (d, truth) = data(Preset::T2, n, 20 + n as u64, 1.0, 1.0);
+        let standard = run_with(&d, Method::Standard, SolverSettings::recommended());
+        let c = calibrate_auto(&d, &request, &AutoSettings::default(), &|| {})
+            .unwrap_or_else(|e| panic!("{n} photos: {e}"));
+        let sel = c.selection.clone().unwrap();
+        if n > MIN_IMAGES {
+            assert_eq!(sel.folds, n, "{n} photos, leave-one-out: {}", sel.reason);
+            assert!(sel.candidates.iter().all(|k| k.cv_rmse_px.is_some()));
+        } else {
+            assert_eq!(c.method, Method::Standard, "{n} photos");
+            assert_eq!(c.state.intrinsics, standard.state.intrinsics);
+        }
+        // Near the true lens (3 px: the bound of the eight photos above).
+        let (e, es) = (truth_error(&c, &truth), truth_error(&standard, &truth));
+        eprintln!(
+            "{n} photos: auto chose {} ({e:.3} px), standard {es:.3} px",
+            c.method
+        );
+        assert!(e.is_finite() && e < 3.0, "{n} photos: {e} px");
+    }
 }
 
 /// A slice of the evaluation grid (`cargo bench --bench auto_grid` runs all of

@@ -19,6 +19,7 @@ mod detect_bad_files;
 mod docs_links;
 mod engine;
 mod exports;
+mod fisheye_photos;
 mod guard_rails;
 mod interchange;
 mod layers;

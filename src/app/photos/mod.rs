@@ -231,7 +231,7 @@ fn outcome_of(det: std::result::Result<Detection, Rejection>, width: u32, height
             } else {
                 Status::Partial
             },
-            reason: String::new(),
+            reason: d.note().to_string(),
             corners: d
                 .corners
                 .iter()
