@@ -266,6 +266,8 @@ pub(crate) fn detect(
         width,
         height,
         complete,
+        // Marker ids fix a ChArUco board's orientation.
+        labelled_by_symmetry: false,
     })
 }
 
