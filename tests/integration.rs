@@ -17,6 +17,7 @@ mod detect_bad_files;
 mod docs_links;
 mod engine;
 mod exports;
+mod flags;
 mod guard_rails;
 mod interchange;
 mod layers;
