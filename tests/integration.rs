@@ -20,6 +20,7 @@ mod docs_links;
 mod engine;
 mod exports;
 mod fisheye_photos;
+mod flags;
 mod guard_rails;
 mod interchange;
 mod layers;
