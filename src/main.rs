@@ -93,8 +93,12 @@ fn main() -> ExitCode {
         Some(Command::Detect(a)) => data::run_detect(a),
         Some(Command::Compare(a)) => models::run_compare(a),
         Some(Command::Sfm(a)) => sfm::run_sfm(a),
-        Some(Command::Target(a)) => deformcal::app::target_print::run(&a).map(|s| println!("{s}")),
-        Some(Command::Advise(a)) => deformcal::app::advise::run(&a).map(|s| println!("{s}")),
+        Some(Command::Target(a)) => deformcal::app::target_print::run(&a)
+            .map(|s| println!("{s}"))
+            .map_err(anyhow::Error::from),
+        Some(Command::Advise(a)) => deformcal::app::advise::run(&a)
+            .map(|s| println!("{s}"))
+            .map_err(anyhow::Error::from),
         None => calibrate::run_default(cli.calibrate),
     };
     match result {

@@ -44,8 +44,11 @@ fn build_package(root: &Path, into: &Path) -> PathBuf {
         "build",
         "--release",
         "--quiet",
-        "-p",
-        "deformcal-python",
+        // The same packages and targets as the `cargo test` that runs this test
+        // (default-members), so features unify alike and nothing is rebuilt.
+        "--workspace",
+        "--lib",
+        "--tests",
     ]));
     let package = into.join("deformcal");
     std::fs::create_dir_all(&package).unwrap();

@@ -3,7 +3,6 @@
 use super::calibration::CalibrationConfig;
 use super::protocol::ProtocolConfig;
 use crate::model::camera::CameraSpec;
-use crate::model::target::Target;
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
