@@ -24,6 +24,8 @@ struct Cli {
     calibrate: CalibrateArgs,
 }
 
+// Parsed once per run: the size of the largest arguments costs nothing.
+#[allow(clippy::large_enum_variant)]
 #[derive(Subcommand, Debug)]
 enum Command {
     /// Calibrate once, from a config, from flags alone, or both (the flags win).

@@ -6,8 +6,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-#[path = "common/sample_photos.rs"]
-mod sample_photos;
+use crate::common::sample_photos;
 
 /// The binary, run in `dir` (relative paths on its command line start there).
 fn deformcal_in(dir: &Path, args: &[&str]) -> Output {

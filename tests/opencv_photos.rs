@@ -13,8 +13,7 @@
 //!
 //! The photos come from tests/common/sample_photos.rs; the test is skipped, with
 //! the reason printed, when they cannot be fetched.
-#[path = "common/sample_photos.rs"]
-mod sample_photos;
+use crate::common::sample_photos;
 
 use sample_photos::sample_photos;
 use std::path::{Path, PathBuf};

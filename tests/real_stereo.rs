@@ -15,8 +15,7 @@
 //! Measured: the textbook calibration is 5–6 % worse than both joint ones, since
 //! each lens is fixed from its own views before the rig is known
 //! (docs/real-photos.md). benches/stereo_photos.rs runs more splits.
-#[path = "common/sample_photos.rs"]
-mod sample_photos;
+use crate::common::sample_photos;
 #[path = "common/stereo_split.rs"]
 mod stereo_split;
 

@@ -230,10 +230,12 @@ pub fn choose(entries: &mut [(Candidate, Option<HeldOut>)]) -> Option<(usize, St
 
 /// "within twice the noise (±n%)": the rule's allowance, said in words.
 fn within_noise(noise_percent: f64) -> String {
-    let times = match CV_STANDARD_ERRORS {
-        k if k == 1.0 => String::new(),
-        k if k == 2.0 => "twice ".into(),
-        k => format!("{k} times "),
+    let times = if CV_STANDARD_ERRORS == 1.0 {
+        String::new()
+    } else if CV_STANDARD_ERRORS == 2.0 {
+        "twice ".into()
+    } else {
+        format!("{CV_STANDARD_ERRORS} times ")
     };
     format!("within {times}the noise (±{noise_percent:.1}%)")
 }

@@ -1,6 +1,7 @@
 //! Shared helpers for the integration tests.
 #![allow(dead_code)]
 pub mod auto_grid;
+pub mod sample_photos;
 use deformcal::model::metrics::mapping_error;
 use deformcal::model::synthetic::{Generator, Preset, Truth};
 use deformcal::solver::problem::Loss;

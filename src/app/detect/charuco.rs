@@ -126,8 +126,11 @@ pub struct Albedo {
     rows: usize,
     /// Per square (row-major): the rectangles inside it in painting order,
     /// as (x0, y0, x1, y1, black) in metres from the board's outer corner.
-    buckets: Vec<Vec<(f64, f64, f64, f64, bool)>>,
+    buckets: Vec<Vec<Rect>>,
 }
+
+/// (x0, y0, x1, y1, black) in metres from the board's outer corner.
+type Rect = (f64, f64, f64, f64, bool);
 
 impl Albedo {
     /// The board's appearance, or None for a board [`CharucoSpec::problem`] refuses.

@@ -185,7 +185,9 @@ fn sample_image(scene: &Scene, optics: &Optics, albedo: Albedo) -> Vec<f64> {
             let centre = shade(scene, optics, albedo, xf, yf);
             let uniform = [(-0.5, -0.5), (0.5, -0.5), (-0.5, 0.5), (0.5, 0.5)]
                 .iter()
-                .all(|(dx, dy)| (shade(scene, optics, albedo, xf + dx, yf + dy) - centre).abs() < 0.5);
+                .all(|(dx, dy)| {
+                    (shade(scene, optics, albedo, xf + dx, yf + dy) - centre).abs() < 0.5
+                });
             if uniform {
                 out.push(centre);
                 continue;
