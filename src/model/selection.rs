@@ -186,13 +186,12 @@ fn paired_noise(a: &HeldOut, b: &HeldOut) -> f64 {
 }
 
 /// How many paired standard errors a candidate's held-out error must be below a
-/// simpler candidate's for `auto` to prefer it. Fitted on the auto grid's seeds
-/// 1-3 and judged on seeds 100 and 200 (docs/benchmarks.md): with one, `auto`
-/// left rigid boards for a bend model that predicted the left-out photos a
-/// little better by chance, with a lens 12 % and more further from the truth
-/// than `standard`'s; with three, it kept `standard` on bending boards where
-/// `standard` was several times worse.
-pub const CV_STANDARD_ERRORS: f64 = 2.0;
+/// simpler candidate's for `auto` to prefer it. Two, fitted on the auto grid's
+/// seeds 1-3, missed a target in 42 of 320 cases on seeds 100 and 200 against
+/// one's 45, but kept `standard` on a bending T2 board where the bend models win
+/// (docs/benchmarks.md); three kept `standard` on bending boards where `standard`
+/// was several times worse. One stays.
+pub const CV_STANDARD_ERRORS: f64 = 1.0;
 
 /// The rule: the candidate with the lowest cross-validated error, unless a simpler
 /// one (fewer parameters; `entries` is in that order) is within
@@ -425,13 +424,14 @@ mod tests {
         ];
         let (i, reason) = choose(&mut e).unwrap();
         assert_eq!(i, 0, "{reason}");
-        assert!(reason.contains("within twice the noise"), "{reason}");
+        assert!(reason.contains("the noise (±"), "{reason}");
     }
 
     #[test]
-    fn a_bend_model_must_predict_better_by_two_standard_errors() {
+    fn a_bend_model_must_predict_better_by_the_rule_s_standard_errors() {
         // Per-frame differences m + a_i with a = ±√3/2 (sample σ 1): the mean
         // difference is 2m/σ = 2m paired standard errors.
+        let k = CV_STANDARD_ERRORS;
         let a = 3f64.sqrt() / 2.0;
         let standard = [10.0, 11.0, 9.0, 10.5];
         let with_gain = |m: f64| {
@@ -445,11 +445,11 @@ mod tests {
                 (candidate(Method::Dynamic), Some(held(&dynamic))),
             ]
         };
-        // 1.5 standard errors: not enough.
-        let (i, reason) = choose(&mut with_gain(0.75)).unwrap();
+        // Half a standard error short of the rule: not enough.
+        let (i, reason) = choose(&mut with_gain((k - 0.5) / 2.0)).unwrap();
         assert_eq!(i, 0, "{reason}");
-        // 2.5 standard errors: the bend model.
-        let (i, reason) = choose(&mut with_gain(1.25)).unwrap();
+        // Half a standard error beyond it: the bend model.
+        let (i, reason) = choose(&mut with_gain((k + 0.5) / 2.0)).unwrap();
         assert_eq!(i, 1, "{reason}");
     }
 
