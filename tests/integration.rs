@@ -27,6 +27,7 @@ mod opencv_photos;
 mod photo_noise;
 mod photos;
 mod protocol;
+mod protocol_shards;
 mod real_stereo;
 mod rejection;
 mod report_html;

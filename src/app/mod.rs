@@ -3,6 +3,7 @@
 pub mod board_json;
 pub mod calibration_json;
 pub mod capi;
+pub mod capi_types;
 pub mod compare;
 pub mod config;
 pub mod config_keys;
