@@ -32,7 +32,10 @@ fn scene(k: usize) -> Scene {
             cy: 479.5,
             k1: -0.1,
             k2: 0.02,
-        },
+        }
+        .into(),
+        image_circle_deg: 0.0,
+        vignetting: 0.0,
         pose: Pose {
             rvec,
             t: [-c[0], -c[1], 0.6 - c[2]],

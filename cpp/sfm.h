@@ -1,8 +1,8 @@
 // Bundle adjustment of the structure-from-motion experiment (src/solver/sfm.rs):
 // camera poses and 3D points against feature observations, the intrinsics held
 // constant at the calibration under test, a Cauchy loss.  Reuses the templated
-// lens models of camera.h, so every lens model works.  Included once, at the end
-// of solver.cc (after its anonymous namespace: Fail, SilenceGlogOnce).
+// lens models of lens/registry.h, so every lens model works.  Included once, at
+// the end of solver.cc (after solver/*.h: Fail, SilenceGlogOnce).
 #pragma once
 
 #include <ceres/ceres.h>
@@ -110,6 +110,41 @@ void ValidateBundle(const ffi::BundleData& d) {
   if (!(d.loss_scale_px >= 0.0) || d.max_iterations < 1) Fail("loss scale or iterations");
 }
 
+// Holds the held frames and points, and gives the linear solver its
+// elimination order: points first, given rather than searched for (the search
+// costs as much as the solve in a window this small).  A pose-only fit (every
+// point held) has nothing to eliminate.
+void HoldAndOrder(ffi::BundleData& d, ceres::Problem& problem, ceres::Solver::Options& s) {
+  for (size_t j = 0; j < d.held_frames.size(); ++j) {
+    double* b = d.poses.data() + kPoseSize * j;
+    if (d.held_frames[j] && problem.HasParameterBlock(b)) problem.SetParameterBlockConstant(b);
+  }
+  for (size_t i = 0; i < d.held_points.size(); ++i) {
+    double* b = d.points.data() + 3 * i;
+    if (d.held_points[i] && problem.HasParameterBlock(b)) problem.SetParameterBlockConstant(b);
+  }
+  auto* ordering = new ceres::ParameterBlockOrdering;
+  size_t free_points = 0;
+  for (size_t i = 0; i < d.held_points.size(); ++i) {
+    double* b = d.points.data() + 3 * i;
+    if (!d.held_points[i] && problem.HasParameterBlock(b)) {
+      ordering->AddElementToGroup(b, 0);
+      ++free_points;
+    }
+  }
+  for (size_t j = 0; j < d.held_frames.size(); ++j) {
+    double* b = d.poses.data() + kPoseSize * j;
+    if (!d.held_frames[j] && problem.HasParameterBlock(b)) ordering->AddElementToGroup(b, 1);
+  }
+  if (free_points > 0) {
+    s.linear_solver_type = ceres::DENSE_SCHUR;
+    s.linear_solver_ordering.reset(ordering);
+  } else {
+    s.linear_solver_type = ceres::DENSE_QR;
+    delete ordering;
+  }
+}
+
 }  // namespace
 
 namespace ffi {
@@ -142,39 +177,9 @@ BundleReport solve_bundle(BundleData& d) {
     }
   });
   if (!known) Fail("unknown lens model `" + std::string(d.lens_model) + "`");
-  for (size_t j = 0; j < d.held_frames.size(); ++j) {
-    double* b = d.poses.data() + kPoseSize * j;
-    if (d.held_frames[j] && problem.HasParameterBlock(b)) problem.SetParameterBlockConstant(b);
-  }
-  for (size_t i = 0; i < d.held_points.size(); ++i) {
-    double* b = d.points.data() + 3 * i;
-    if (d.held_points[i] && problem.HasParameterBlock(b)) problem.SetParameterBlockConstant(b);
-  }
   ceres::Solver::Options s;
+  HoldAndOrder(d, problem, s);
   s.max_num_iterations = d.max_iterations;
-  // Points first in the elimination order, given rather than searched for: the
-  // search costs as much as the solve in a window this small.  A pose-only fit
-  // (every point held) has nothing to eliminate.
-  auto* ordering = new ceres::ParameterBlockOrdering;
-  size_t free_points = 0;
-  for (size_t i = 0; i < d.held_points.size(); ++i) {
-    double* b = d.points.data() + 3 * i;
-    if (!d.held_points[i] && problem.HasParameterBlock(b)) {
-      ordering->AddElementToGroup(b, 0);
-      ++free_points;
-    }
-  }
-  for (size_t j = 0; j < d.held_frames.size(); ++j) {
-    double* b = d.poses.data() + kPoseSize * j;
-    if (!d.held_frames[j] && problem.HasParameterBlock(b)) ordering->AddElementToGroup(b, 1);
-  }
-  if (free_points > 0) {
-    s.linear_solver_type = ceres::DENSE_SCHUR;
-    s.linear_solver_ordering.reset(ordering);
-  } else {
-    s.linear_solver_type = ceres::DENSE_QR;
-    delete ordering;
-  }
   s.num_threads = 1;
   s.logging_type = ceres::SILENT;
   s.function_tolerance = 1e-6;

@@ -33,7 +33,8 @@ typedef struct DcTarget {
 #define DC_MAX_LENS_PARAMS 12
 
 /* A camera of the rig; camera 0 is the reference of the rig poses.  model is a
- * lens model name ("radial3", "opencv5", "opencv8", "kb4", "ds"); NULL = "radial3". */
+ * lens model name ("radial3", "opencv5", "opencv8", "kb4", "ds",
+ * "pinhole"); NULL = "radial3". */
 typedef struct DcCamera {
   const char* name;
   uint32_t width;

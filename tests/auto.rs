@@ -7,9 +7,11 @@ use common::*;
 use deformcal::model::metrics::mapping_error;
 use deformcal::model::selection::{AutoSettings, Selection};
 use deformcal::model::synthetic::{Preset, Truth};
+use deformcal::solver::calibrate::MIN_IMAGES;
 use deformcal::solver::problem::SolverSettings;
 use deformcal::solver::select::calibrate_auto;
 use deformcal::{Calibration, Dataset, Method, Request};
+use rayon::prelude::*;
 
 /// `auto` as a config without `[calibration]` keys runs it (board priors estimated).
 fn auto(d: &Dataset) -> Calibration {
@@ -174,10 +176,48 @@ fn auto_calibrates_small_captures() {
     assert!(truth_error(&c, &truth).is_finite());
 }
 
+/// Every capture that `standard` calibrates (3 photos and up) gets an answer from
+/// `auto`: below the default folds' ten photos each photo is left out in turn, and
+/// with too few to leave one out it keeps `standard`.
+#[test]
+fn auto_answers_every_capture_from_three_to_nine_photos() {
+    let request = Request {
+        method: Method::Standard,
+        settings: SolverSettings::recommended(),
+        gauge: None,
+    };
+    for n in 3..=9 {
+        let (d, truth) = data(Preset::T2, n, 20 + n as u64, 1.0, 1.0);
+        let standard = run_with(&d, Method::Standard, SolverSettings::recommended());
+        let c = calibrate_auto(&d, &request, &AutoSettings::default(), &|| {})
+            .unwrap_or_else(|e| panic!("{n} photos: {e}"));
+        let sel = c.selection.clone().unwrap();
+        if n > MIN_IMAGES {
+            assert_eq!(sel.folds, n, "{n} photos, leave-one-out: {}", sel.reason);
+            assert!(sel.candidates.iter().all(|k| k.cv_rmse_px.is_some()));
+        } else {
+            assert_eq!(c.method, Method::Standard, "{n} photos");
+            assert_eq!(c.state.intrinsics, standard.state.intrinsics);
+        }
+        // Near the true lens (3 px: the bound of the eight photos above).
+        let (e, es) = (truth_error(&c, &truth), truth_error(&standard, &truth));
+        eprintln!(
+            "{n} photos: auto chose {} ({e:.3} px), standard {es:.3} px",
+            c.method
+        );
+        assert!(e.is_finite() && e < 3.0, "{n} photos: {e} px");
+    }
+}
+
 /// A slice of the evaluation grid (`cargo bench --bench auto_grid` runs all of
-/// it): `auto` with the default settings stays within the targets: regret at most
-/// 1.3, at most 10 % worse than `standard` on a rigid board, never `standard`
-/// where `standard` is twice as far from the true lens as the best candidate.
+/// it), on seeds used neither to fit the rule's threshold (1-3) nor by the grid
+/// (100, 200): `auto` with the default settings stays within the targets: at
+/// most 10 % worse than `standard` on a rigid board, never `standard` where
+/// `standard` is twice as far from the true lens as the best candidate, median
+/// regret at most 1.05; and regret at most 1.3 on the 25-photo cases. Small
+/// captures of 8 and 12 photos (left out one at a time) of every kind of board
+/// are held to all but the last: on the grid no rule, not even one that knows
+/// the kind of board, keeps every case's regret under 1.3 (docs/benchmarks.md).
 #[test]
 fn auto_meets_its_targets_on_a_slice_of_the_grid() {
     use common::auto_grid::{self, Board, Case};
@@ -199,12 +239,33 @@ fn auto_meets_its_targets_on_a_slice_of_the_grid() {
             });
         }
     }
-    let outcomes: Vec<_> = cases.into_iter().map(auto_grid::run).collect();
+    for (board, print_mm) in [
+        (Board::Rigid, 0.0),
+        (Board::Paraboloid(2.0), 0.0),
+        (Board::Twist(2.0), 0.0),
+        (Board::Plate(2.0), 0.2),
+    ] {
+        for (frames, model, noise_px, seed) in [
+            (8, LensModel::Radial3, 0.1, 7),
+            (12, LensModel::OpenCv5, 0.3, 8),
+        ] {
+            cases.push(Case {
+                board,
+                print_mm,
+                frames,
+                noise_px,
+                model,
+                seed,
+            });
+        }
+    }
+    let outcomes: Vec<_> = cases.into_par_iter().map(auto_grid::run).collect();
     eprint!("{}", auto_grid::table(&outcomes));
     for o in &outcomes {
         eprintln!(
-            "{} {:?}: chose {} ({:.3} px; standard {:.3}, dynamic {:.3}, full {:.3}) — {}",
+            "{} {} frames {:?}: chose {} ({:.3} px; standard {:.3}, dynamic {:.3}, full {:.3}) — {}",
             o.case.board.label(),
+            o.case.frames,
             o.case.model,
             o.chosen,
             o.error_of(o.chosen),
@@ -214,8 +275,18 @@ fn auto_meets_its_targets_on_a_slice_of_the_grid() {
             o.reason
         );
     }
-    let failures = auto_grid::failures(&outcomes);
+    let small = |o: &auto_grid::Outcome| o.case.frames < 25;
+    let (small_captures, at_25): (Vec<_>, Vec<_>) = outcomes.iter().cloned().partition(small);
+    let failures = auto_grid::failures(&at_25);
     assert!(failures.is_empty(), "{}", failures.join("\n"));
+    let failures: Vec<String> = auto_grid::failures(&small_captures)
+        .into_iter()
+        .filter(|f| !f.starts_with("regret"))
+        .collect();
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+    let mut regret: Vec<f64> = outcomes.iter().map(|o| o.regret()).collect();
+    regret.sort_by(f64::total_cmp);
+    assert!(regret[regret.len() / 2] <= 1.05, "{regret:?}");
 }
 
 /// The report says why `auto` chose, and that rejection was off when it was.

@@ -229,3 +229,42 @@ fn the_c_api_refuses_implausible_spacing_and_tolerances() {
         "rc {rc}: {message}"
     );
 }
+
+/// The names between `from` and the next `to` in `text`, each in double quotes.
+fn quoted_between(text: &str, from: &str, to: &str) -> Vec<String> {
+    let start = text.find(from).unwrap_or_else(|| panic!("no `{from}`")) + from.len();
+    let end = start
+        + text[start..]
+            .find(to)
+            .unwrap_or_else(|| panic!("no `{to}`"));
+    let quoted = regex::Regex::new(r#""([a-z0-9]+)""#).unwrap();
+    quoted
+        .captures_iter(&text[start..end])
+        .map(|c| c[1].to_string())
+        .collect()
+}
+
+/// The C header's lists of lens models and methods, its largest parameter count
+/// and its default model are the registries': a model or method added to one
+/// and not the other fails here.
+#[test]
+fn the_c_header_names_what_the_registries_hold() {
+    use deformcal::model::board::Method;
+    use deformcal::model::lens::{LensModel, MAX_PARAMS};
+    let header =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("include/deformcal.h"))
+            .unwrap();
+    let models = quoted_between(&header, "model is a\n * lens model name (", ")");
+    let registered: Vec<String> = LensModel::ALL.map(|m| m.name().to_string()).to_vec();
+    assert_eq!(models, registered);
+    let default = quoted_between(&header, "NULL = ", ".");
+    assert_eq!(default, [LensModel::default().name()]);
+    let methods = quoted_between(&header, "const char* method;", "NULL");
+    let mut expected: Vec<String> = Method::ALL.map(|m| m.name().to_string()).to_vec();
+    expected.push("auto".to_string());
+    assert_eq!(methods, expected);
+    assert!(
+        header.contains(&format!("#define DC_MAX_LENS_PARAMS {MAX_PARAMS}\n")),
+        "DC_MAX_LENS_PARAMS"
+    );
+}

@@ -40,7 +40,7 @@ fn full_9x6_boards_any_orientation() {
 fn bent_board_with_distortion() {
     let mut sc = scene(6, 9, [0.3, -0.2, 0.1], 0.5, [0.0, 0.0]);
     sc.bend = 0.004;
-    sc.camera.k1 = -0.2;
+    sc.camera.set("k1", -0.2);
     let (det, truth) = run(&sc);
     let det = det.expect("bent board found");
     assert!(det.complete);

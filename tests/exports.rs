@@ -161,6 +161,8 @@ fn expected_formats(
             Some("OPENCV_FISHEYE"),
         ),
         LensModel::DoubleSphere => (None, Some("none"), None),
+        // Every distortion coefficient 0.
+        LensModel::Pinhole => (Some("plumb_bob"), Some("radtan"), Some("PINHOLE")),
     }
 }
 
@@ -190,7 +192,9 @@ fn expected_warnings(cam: &CameraJson) -> Vec<String> {
         ));
     }
     if model == LensModel::OpenCv8 {
-        w.push(format!("camchain.yaml: camera `{name}` is left out: Kalibr has no rational (`opencv8`) lens model"));
+        w.push(format!(
+            "camchain.yaml: camera `{name}` is left out: the format has no `opencv8` lens model"
+        ));
     }
     if model == LensModel::DoubleSphere {
         w.push(format!(

@@ -365,6 +365,7 @@ fn exports_of_every_lens_model_project_like_us() {
             LensModel::OpenCv8 => (Some(("rational_polynomial", 8)), Some("LENSMODEL_OPENCV8")),
             LensModel::Kb4 => (Some(("fisheye", 4)), None),
             LensModel::DoubleSphere => (None, None),
+            LensModel::Pinhole => (Some(("plumb_bob", 5)), Some("LENSMODEL_PINHOLE")),
         };
         let yaml = dir.path().join("opencv.yaml");
         let cameramodel = dir.path().join(format!("{}.cameramodel", cam.name));

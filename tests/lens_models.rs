@@ -127,7 +127,10 @@ const SEEDS: u64 = 4;
 /// `static_prior_mm` do, and meet the targets for every model
 /// ([`recommended_settings_meet_the_lens_targets_over_32_sets`]).
 fn allowed(model: LensModel) -> (f64, f64) {
-    if matches!(model, LensModel::Radial3 | LensModel::OpenCv5) {
+    if matches!(
+        model,
+        LensModel::Radial3 | LensModel::OpenCv5 | LensModel::Pinhole
+    ) {
         (1.3, 1.5)
     } else {
         (2.5, 2.0)

@@ -142,6 +142,57 @@ pub fn explain(text: &str, message: &str, span: Option<std::ops::Range<usize>>) 
     }
 }
 
+/// The line of `key` in table `table` (the `index`-th of an array of tables), or of
+/// the table's header when `key` is empty.
+pub(crate) fn key_line(text: &str, table: &str, index: usize, key: &str) -> Option<usize> {
+    let mut current: Option<(String, usize)> = None;
+    let mut seen: std::collections::BTreeMap<String, usize> = Default::default();
+    for (n, line) in text.lines().enumerate() {
+        let t = line.trim();
+        if let Some((h, _)) = header(t) {
+            let count = seen.entry(h.clone()).or_insert(0);
+            current = Some((h.clone(), *count));
+            *count += 1;
+            if key.is_empty() && h == table && current.as_ref().map(|c| c.1) == Some(index) {
+                return Some(n + 1);
+            }
+            continue;
+        }
+        if let Some((h, i)) = &current {
+            if h == table && *i == index && !key.is_empty() {
+                if let Some(rest) = t.strip_prefix(key) {
+                    if rest.trim_start().starts_with('=') {
+                        return Some(n + 1);
+                    }
+                }
+            }
+        }
+    }
+    None
+}
+
+/// Splits a message that starts with `table.key`, `table[i].key` or `[table]`.
+pub(crate) fn message_key(message: &str) -> Option<(String, usize, String)> {
+    if let Some(rest) = message.strip_prefix('[') {
+        let table = rest.split(']').next()?.trim_start_matches('[');
+        return Some((table.to_string(), 0, String::new()));
+    }
+    let head: String = message
+        .chars()
+        .take_while(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '.' | '[' | ']'))
+        .collect();
+    let (table, key) = head.split_once('.')?;
+    let key: String = key
+        .chars()
+        .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+        .collect();
+    let (table, index) = match table.split_once('[') {
+        Some((t, i)) => (t, i.trim_end_matches(']').parse().ok()?),
+        None => (table, 0),
+    };
+    Some((table.to_string(), index, key))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -1,9 +1,11 @@
 //! The application layer: config, data files, photos and board detection, exports, the evaluation protocol,
 //! reports and plots, and the C API. Builds on the model and solver layers.
+pub mod advise;
 pub mod board_json;
 pub mod calibration_json;
 pub mod capi;
 pub mod capi_types;
+pub mod commands;
 pub mod compare;
 pub mod config;
 pub mod config_keys;
@@ -24,5 +26,7 @@ pub mod report;
 pub mod sfm;
 pub mod sfm_report;
 pub mod source;
+pub mod target_config;
+pub mod target_print;
 pub mod text;
 pub mod uncertainty_plot;

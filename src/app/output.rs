@@ -11,6 +11,10 @@ use crate::error::{Error, Result};
 use crate::solver::calibrate::Calibration;
 use std::path::{Path, PathBuf};
 
+/// The config that reruns a calibration: its config file and flags as one file
+/// (written by `deformcal calibrate` on success).
+pub const RERUN_CONFIG: &str = "config.toml";
+
 /// What a calibration that failed its guard rails writes instead of
 /// `calibration.json`: a name no pipeline takes for a result.
 pub const FAILED_CALIBRATION: &str = "FAILED-calibration.json";
@@ -24,6 +28,7 @@ pub fn calibration_files() -> crate::app::fsio::Owns {
         matches!(
             name,
             "calibration.json"
+                | RERUN_CONFIG
                 | crate::app::board_json::BOARD_JSON
                 | FAILED_CALIBRATION
                 | FAILED_OUTLIERS

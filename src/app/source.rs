@@ -33,6 +33,7 @@ pub fn load(config: &Config) -> Result<Loaded> {
             let run = crate::app::photos::detect_photos(
                 &config.data,
                 config.target,
+                config.charuco.as_ref(),
                 &config.cameras,
                 &config.output_dir,
                 true,

@@ -46,6 +46,10 @@ pub enum BendShape {
     Warped,
     /// A paraboloid whose coefficients drift smoothly with the frame index (video).
     Smooth,
+    /// A twist, per image: the board held by two opposite corners and turned, the
+    /// x·y term of the paraboloid leading, with the degree-4 twist terms x³y and
+    /// x·y³ and a little of the paraboloid's own curvature on top.
+    Twisted,
 }
 
 /// What a preset generates.
@@ -239,20 +243,15 @@ pub fn rig_intrinsics(k: usize) -> Intrinsics {
 pub fn rig_intrinsics_of(model: LensModel, k: usize) -> Intrinsics {
     let mut i = true_intrinsics_of(model);
     let k = k as f64;
-    // The first distortion coefficient of each model varies a little too.
-    let first = model.param_names()[4];
+    // The first distortion coefficient of each model (if it has one) varies a little too.
+    let first = model.param_names().get(4).copied();
     let step = if model.info().pinhole_like {
         0.01
     } else {
         0.002
     };
-    for (name, delta) in [
-        ("fx", 7.0),
-        ("fy", 5.0),
-        ("cx", -4.0),
-        ("cy", 3.0),
-        (first, step),
-    ] {
+    let core = [("fx", 7.0), ("fy", 5.0), ("cx", -4.0), ("cy", 3.0)];
+    for (name, delta) in core.into_iter().chain(first.map(|f| (f, step))) {
         let v = i.get(name).expect("parameter of the model");
         i.set(name, v + delta * k);
     }
@@ -264,24 +263,12 @@ pub fn true_intrinsics() -> Intrinsics {
     true_intrinsics_of(LensModel::Radial3)
 }
 
-/// The simulated camera (1936 × 1216 pixels) under each lens model: the 17 mm
-/// lens for `radial3` and `opencv5` (with tangential terms), a 112° (diagonal)
-/// wide-angle lens for `opencv8` (whose rational terms a narrow lens cannot
-/// determine), a fisheye whose image corners lie about 95° off axis for `kb4`,
-/// and a lens of over 190° for `ds`, whose image circle just cuts the corners.
+/// The simulated camera (1936 × 1216 pixels) under each lens model: the
+/// registry's `synthetic` parameters (the 17 mm lens for `radial3` and
+/// `opencv5`, wide-angle and fisheye lenses for the others; each model's file in
+/// `model::lens` says which).
 pub fn true_intrinsics_of(model: LensModel) -> Intrinsics {
-    let p: &[f64] = match model {
-        LensModel::Radial3 => &[2901.0, 2899.5, 975.3, 601.8, -0.11, 0.14, -0.05],
-        LensModel::OpenCv5 => &[
-            2901.0, 2899.5, 975.3, 601.8, -0.11, 0.14, 1.2e-3, -8e-4, -0.05,
-        ],
-        LensModel::OpenCv8 => &[
-            1100.0, 1099.4, 975.3, 601.8, 0.1, 0.01, 1.2e-3, -8e-4, 5e-4, 0.3, 0.03, 1e-3,
-        ],
-        LensModel::Kb4 => &[690.0, 689.2, 971.6, 606.4, 0.02, -0.012, 0.004, -6e-4],
-        LensModel::DoubleSphere => &[520.0, 519.4, 971.6, 606.4, -0.18, 0.61],
-    };
-    Intrinsics::from_params(model, p).expect("parameter count of the model")
+    Intrinsics::from_params(model, model.info().synthetic).expect("parameter count of the model")
 }
 
 /// Ground truth of a generated dataset.
@@ -519,6 +506,20 @@ impl Generator {
                     *c = 1.5 * n.sample(rng) / h.powi(degree - 2);
                 }
                 shape.c = n.sample(rng);
+            }
+            BendShape::Twisted => {
+                // In units of the board's half size, as for `Warped`; the sign of
+                // the twist is random, its size not.
+                let h = (s.target.cols.max(s.target.rows) as f64 - 1.0) / 2.0 * s.target.spacing;
+                let sign = if rng.gen::<bool>() { 1.0 } else { -1.0 };
+                shape = Paraboloid {
+                    a: 0.2 * n.sample(rng),
+                    b: 0.2 * n.sample(rng),
+                    c: sign * (1.0 + 0.2 * n.sample(rng)),
+                };
+                // x³y and x·y³ in `HigherBend`'s order (x³, x²y, xy², y³, x⁴, x³y, …).
+                higher[5] = 0.5 * n.sample(rng) / (h * h);
+                higher[7] = 0.5 * n.sample(rng) / (h * h);
             }
             BendShape::Smooth => {
                 // Slow drifts, periods of 60 to 150 frames: a board flexing in the hands.

@@ -91,12 +91,86 @@ pub fn calibrate_auto_sharing(
     warm: &SharedWarmStart,
     tick: &(dyn Fn() + Sync),
 ) -> Result<Calibration> {
+    trial(dataset, request, auto, warm, tick).map(|t| t.result)
+}
+
+/// Everything `auto` computed: the result, and every candidate's fit to all the
+/// data with its held-out record, for a study of the rule (the evaluation grid).
+#[derive(Debug)]
+pub struct Trial {
+    /// What [`calibrate_auto`] returns.
+    pub result: Calibration,
+    /// Every candidate's fit to all the data, in `auto.candidates`' order; empty
+    /// where the data were too few to cross-validate.
+    pub fits: Vec<(Method, Result<Calibration>)>,
+    /// Each fit's held-out record (as `fits`); `None` where a fold failed.
+    pub held: Vec<Option<HeldOut>>,
+}
+
+/// [`calibrate_auto_sharing`], keeping every candidate's fit and held-out record.
+pub fn trial(
+    dataset: &Dataset,
+    request: &Request,
+    auto: &AutoSettings,
+    warm: &SharedWarmStart,
+    tick: &(dyn Fn() + Sync),
+) -> Result<Trial> {
     check(auto)?;
+    let rigid = |why: String| {
+        standard_because(dataset, request, auto, warm, &why).map(|result| Trial {
+            result,
+            fits: Vec::new(),
+            held: Vec::new(),
+        })
+    };
     if !can_cross_validate(dataset.num_frames(), auto) {
-        return standard_because(dataset, request, auto, warm, &too_few(dataset.num_frames()));
+        return rigid(too_few(dataset.num_frames()));
     }
-    let fits: Vec<(Method, Result<Calibration>)> = auto
-        .candidates
+    let mut fits = fit_candidates(dataset, request, auto, warm, tick);
+    let at = fits
+        .iter()
+        .position(|(m, _)| *m == Method::Standard)
+        .expect("checked: standard is a candidate");
+    // `standard` failing is the data's fault, in its own words.
+    if fits[at].1.is_err() {
+        return Err(fits.swap_remove(at).1.expect_err("checked: an error"));
+    }
+    let standard = fits[at].1.as_ref().expect("checked: a calibration");
+    // Every candidate is cross-validated on the same data: what `standard` kept.
+    let cv = &standard.dataset;
+    if !can_cross_validate(cv.num_frames(), auto) {
+        return rigid(too_few(cv.num_frames()));
+    }
+    let k = fold_count(cv.num_frames(), auto);
+    let folds = selection::folds(cv.num_frames(), k, auto.seed);
+    let held = cross_validate(cv, standard, request, auto, &folds, tick);
+    let scored = |h: &Option<HeldOut>| h.as_ref().map_or(0, |h| h.points.iter().sum::<usize>());
+    if scored(&held[at]) == 0 {
+        return rigid(format!(
+            "no left-out photo has {MIN_SCORED_OBSERVATIONS} corners or more to judge a bend by, \
+             so the board is taken as rigid (`standard`)"
+        ));
+    }
+    let selection = select(&fits, &held, at, k, auto)?;
+    let mut result = fits
+        .iter()
+        .find(|(m, _)| *m == selection.chosen)
+        .and_then(|(_, r)| r.as_ref().ok())
+        .expect("`select` chooses a candidate with a fit")
+        .clone();
+    result.selection = Some(selection);
+    Ok(Trial { result, fits, held })
+}
+
+/// Every candidate calibrated on all the data (in parallel).
+fn fit_candidates(
+    dataset: &Dataset,
+    request: &Request,
+    auto: &AutoSettings,
+    warm: &SharedWarmStart,
+    tick: &(dyn Fn() + Sync),
+) -> Vec<(Method, Result<Calibration>)> {
+    auto.candidates
         .par_iter()
         .map(|&m| {
             let r = warm
@@ -114,63 +188,46 @@ pub fn calibrate_auto_sharing(
             tick();
             (m, r)
         })
-        .collect();
-    let mut fits = fits;
-    let at = fits
-        .iter()
-        .position(|(m, _)| *m == Method::Standard)
-        .expect("checked: standard is a candidate");
-    // `standard` failing is the data's fault, in its own words.
-    if fits[at].1.is_err() {
-        return Err(fits.swap_remove(at).1.expect_err("checked: an error"));
-    }
-    let fits = fits;
-    let standard = fits[at].1.as_ref().expect("checked: a calibration");
-    // Every candidate is cross-validated on the same data: what `standard` kept.
-    let cv = &standard.dataset;
-    if !can_cross_validate(cv.num_frames(), auto) {
-        return standard_because(dataset, request, auto, warm, &too_few(cv.num_frames()));
-    }
-    let k = fold_count(cv.num_frames(), auto);
-    let folds = selection::folds(cv.num_frames(), k, auto.seed);
-    let held = cross_validate(cv, standard, request, auto, &folds, tick);
-    let scored = |h: &Option<HeldOut>| h.as_ref().map_or(0, |h| h.points.iter().sum::<usize>());
-    if scored(&held[at]) == 0 {
-        let why = format!(
-            "no left-out photo has {MIN_SCORED_OBSERVATIONS} corners or more to judge a bend by, \
-             so the board is taken as rigid (`standard`)"
-        );
-        return standard_because(dataset, request, auto, warm, &why);
-    }
-    let order = by_complexity(&fits);
+        .collect()
+}
+
+/// The rule applied to the candidates' fits and held-out records (`standard` is
+/// `fits[at]`), with the figures `calibration.json` records.
+fn select(
+    fits: &[(Method, Result<Calibration>)],
+    held: &[Option<HeldOut>],
+    at: usize,
+    k: usize,
+    auto: &AutoSettings,
+) -> Result<Selection> {
+    let order = by_complexity(fits);
     let mut entries: Vec<(Candidate, Option<HeldOut>)> = order
         .iter()
         .map(|&i| summarise(&fits[i], held[i].clone()))
         .collect();
     let (chosen_at, reason) = selection::choose(&mut entries)
         .ok_or_else(|| Error::Degenerate("no candidate method could be cross-validated".into()))?;
-    let candidates: Vec<Candidate> = entries.iter().map(|(c, _)| c.clone()).collect();
+    let candidates: Vec<Candidate> = entries.into_iter().map(|(c, _)| c).collect();
     let (chosen, reason) = match selection::choose_bend_order(&candidates) {
         Some((m, why)) => (m, format!("{why}; cross-validation alone: {reason}")),
-        None => (entries[chosen_at].0.method, reason),
+        None => (candidates[chosen_at].method, reason),
     };
-    let standard_intrinsics = standard.state.intrinsics.clone();
-    let (_, result) = fits
-        .into_iter()
+    let standard = fits[at].1.as_ref().expect("checked: a calibration");
+    let result = fits
+        .iter()
         .find(|(m, _)| *m == chosen)
-        .expect("the chosen method is a candidate");
-    let mut result = result?;
-    let (shift, shift_rot) = projection_shift(&standard_intrinsics, &result);
-    result.selection = Some(Selection {
+        .and_then(|(_, r)| r.as_ref().ok())
+        .ok_or_else(|| Error::Degenerate(format!("the chosen method `{chosen}` has no fit")))?;
+    let (shift, shift_rot) = projection_shift(&standard.state.intrinsics, result);
+    Ok(Selection {
         chosen,
         folds: k,
         seed: auto.seed,
-        candidates: entries.into_iter().map(|(c, _)| c).collect(),
+        candidates,
         reason,
         projection_shift_px: shift,
         projection_shift_rot_px: shift_rot,
-    });
-    Ok(result)
+    })
 }
 
 /// Why `frames` photos cannot be cross-validated.

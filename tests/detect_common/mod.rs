@@ -29,7 +29,9 @@ pub fn scene(rows: usize, cols: usize, rvec: [f64; 3], dist: f64, shift: [f64; 2
         .map(|i| r[i][0] * w / 2.0 + r[i][1] * h / 2.0)
         .collect();
     Scene {
-        camera: camera(),
+        camera: camera().into(),
+        image_circle_deg: 0.0,
+        vignetting: 0.0,
         pose: Pose {
             rvec,
             t: [shift[0] - c[0], shift[1] - c[1], dist - c[2]],

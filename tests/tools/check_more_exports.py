@@ -14,7 +14,7 @@ Prints JSON with, per camera name present in the request:
   reimplementation of aslam_cv's PinholeProjection + RadialTangentialDistortion /
   EquidistantDistortion and DoubleSphereProjection; plus T_cn_cnm1; null when absent;
 - "colmap": cameras.txt projected by pycolmap (COLMAP itself) when it imports, and
-  by a reimplementation of COLMAP's OPENCV / FULL_OPENCV / OPENCV_FISHEYE models
+  by a reimplementation of COLMAP's PINHOLE / OPENCV / FULL_OPENCV / OPENCV_FISHEYE models
   in any case, both shifted back by COLMAP's 0.5 px pixel-centre offset.
 And "stereo_rectify": cv2.stereoRectify (CALIB_ZERO_DISPARITY, alpha=-1) on the
 first two cameras of calibration.json, when there are exactly two pinhole-like ones.
@@ -128,12 +128,14 @@ def kalibr_entries(path):
 
 
 def colmap_reimpl(model, params, p):
-    """COLMAP's ImgFromCam for the three models: normalise, distort, scale."""
+    """COLMAP's ImgFromCam for the four models: normalise, distort, scale."""
     x, y, z = p
     u, v = x / z, y / z
     f1, f2, c1, c2 = params[:4]
     e = params[4:]
-    if model == "OPENCV_FISHEYE":
+    if model == "PINHOLE":
+        du = dv = 0.0
+    elif model == "OPENCV_FISHEYE":
         k1, k2, k3, k4 = e
         r = math.sqrt(u * u + v * v)
         if r > np.finfo(np.float64).eps:
@@ -189,7 +191,8 @@ def rectify_entry(folder):
     calib = json.load(open(folder + "/calibration.json"))
     cams = calib["cameras"]
     keys = {"radial3": ["k1", "k2", "p1", "p2", "k3"], "opencv5": ["k1", "k2", "p1", "p2", "k3"],
-            "opencv8": ["k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"]}
+            "opencv8": ["k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"],
+            "pinhole": ["k1", "k2", "p1", "p2", "k3"]}
     if len(cams) != 2 or any(c["model"] not in keys for c in cams):
         return None
     km, ds = [], []

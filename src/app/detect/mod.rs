@@ -15,14 +15,22 @@
 //!    labelling) finds and labels the grid; it is robust to partial views,
 //!    blur and distortion but only ~0.2 px accurate.
 //! 3. [`refine`]: cornerSubPix-style gradient-orthogonality refinement on the
-//!    full-precision image, which also yields each corner's uncertainty. A
+//!    full-precision image (window 0.3× the cell, shrunk to 0.4× a corner's own
+//!    spacing where its squares are compressed), which also yields each
+//!    corner's uncertainty. A
 //!    corner whose refined window is not point-symmetric (occluder, clutter
 //!    or board edge in the window) is retried with half the window and
 //!    dropped if still asymmetric: a missing corner is harmless, a wrong one
 //!    is not.
-//! 4. [`orient`]: place the labelled patch on the board (handedness, square
-//!    colour, visible board edges); ambiguous partial views are rejected. A
-//!    stray corner labelled just outside the board is trimmed.
+//! 4. `grow`: extend the labelled grid outward along its rows and columns
+//!    (quadratic extrapolation, then refinement with a window of 0.4× the
+//!    local spacing), to the compressed squares near a fisheye's rim that
+//!    the grid finder gives up on.
+//! 5. [`orient`]: place the labelled patch on the board (handedness, square
+//!    colour, visible board edges); partial views that fit in several places
+//!    are rejected, those that fit the board turned by 180° kept (the
+//!    labelling is then by the orientation rule below). A stray corner
+//!    labelled just outside the board is trimmed.
 //!
 //! Failure reasons: `Blurred` when nothing (or too little) was found and the
 //! image's sharpest edges are wider than ~10 px (range/max-gradient);
@@ -34,7 +42,9 @@
 //! seen from its printed side is never labelled mirrored). When the square
 //! colours cannot tell the symmetric placements apart (rows+cols even, or
 //! square boards for 180°), the placement whose +x axis points most to the
-//! right in the image wins. For 9×6 (10×7 squares) this matches OpenCV.
+//! right in the image wins, for complete and partial views alike
+//! ([`Detection::labelled_by_symmetry`]). For 9×6 (10×7 squares) this matches
+//! OpenCV.
 //!
 //! # Weight
 //! [`Corner::sigma`] is the 1-σ positional uncertainty (px, worst axis) of the
@@ -50,6 +60,8 @@
 //! - [`render`]: the synthetic-board renderer (public so the integration
 //!   tests and the benchmark can draw photos with known truth).
 
+pub mod charuco;
+mod grow;
 pub mod load;
 pub mod orient;
 pub mod refine;
@@ -61,7 +73,7 @@ use std::path::Path;
 
 /// Identifies the detector's algorithm in the detection cache: change it with any
 /// change that alters results, so detections of an older version are not reused.
-pub const ALGORITHM: &str = "calib-targets 0.16.1 + deformcal refine 1 + orient 1";
+pub const ALGORITHM: &str = "calib-targets 0.16.1 + deformcal refine 2 + grow 1 + orient 2";
 
 /// σ (px) at which [`Corner::weight`] is 0.5, and the reference σ of an
 /// observation weight σ_ref/σ (a clean, sharp corner's σ is about this).
@@ -91,6 +103,23 @@ pub struct Detection {
     pub height: u32,
     /// All rows·cols corners were found.
     pub complete: bool,
+    /// The board looks alike turned by 180° (rows + cols even) and the view
+    /// was labelled by the orientation rule (see the crate doc), not by
+    /// anything printed on the board: the labelling is consistent between
+    /// views that show the board the same way up.
+    pub labelled_by_symmetry: bool,
+}
+
+impl Detection {
+    /// A note for `detections.csv`'s reason column, or "" when there is
+    /// nothing to say.
+    pub fn note(&self) -> &'static str {
+        if self.labelled_by_symmetry {
+            "labelled by its orientation in the image: the board looks alike turned by 180 degrees"
+        } else {
+            ""
+        }
+    }
 }
 
 /// Why an image gave no detection. A per-image outcome, not a failure of the
@@ -135,6 +164,9 @@ pub struct Detector {
     /// Fewest corners a detection may have (default 6, and never more than
     /// rows·cols).
     pub min_corners: usize,
+    /// A ChArUco board to find instead of a chessboard (`charuco`); rows and
+    /// cols given to the detect methods are then the board's inner corners.
+    pub charuco: Option<charuco::CharucoSpec>,
 }
 
 impl Default for Detector {
@@ -142,6 +174,7 @@ impl Default for Detector {
         Detector {
             max_pixels: 100_000_000,
             min_corners: 6,
+            charuco: None,
         }
     }
 }
@@ -165,7 +198,10 @@ impl Detector {
         rows: usize,
         cols: usize,
     ) -> Result<Detection, Rejection> {
-        pipeline::detect(self, img, rows, cols)
+        match &self.charuco {
+            Some(spec) => charuco::detect(self, spec, img),
+            None => pipeline::detect(self, img, rows, cols),
+        }
     }
 }
 

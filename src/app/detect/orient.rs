@@ -20,10 +20,13 @@
 //!
 //! If one placement survives, it is the answer. If several survive and the
 //! patch spans the whole board, they differ only by a symmetry the colours
-//! cannot break (e.g. 180° on an even×even-squares board); we then pick,
+//! cannot break (e.g. 180° on an odd×odd-squares board); we then pick,
 //! deterministically, the placement whose board x axis points most to the
 //! right in the image (so corner 0 is towards the top-left, as OpenCV and
-//! mrgingham tend to report). Otherwise the view is ambiguous and rejected.
+//! mrgingham tend to report). A partial view whose two surviving placements
+//! are the board turned by 180° is kept the same way: the board looks alike
+//! both ways, the pose absorbs the choice, and the intrinsics do not depend on
+//! it. Any other ambiguity (where on the board a patch sits) is rejected.
 
 use crate::app::detect::refine::FloatImage;
 use std::collections::HashMap;
@@ -79,14 +82,23 @@ enum Side {
     Unknown,
 }
 
-/// Assign board indices; returns (board index, corner) pairs. Corners trimmed
-/// as strays are not returned.
+/// The board indices of a view.
+#[derive(Debug)]
+pub struct Indexed {
+    /// (board index, corner) pairs; corners trimmed as strays are left out.
+    pub corners: Vec<(usize, Labelled)>,
+    /// The board looks alike turned by 180° (or 90°) and the labelling was
+    /// chosen by the image's orientation rule, not read from the board.
+    pub by_symmetry: bool,
+}
+
+/// Assign board indices.
 pub fn assign_indices(
     corners: &[Labelled],
     img: &FloatImage,
     rows: usize,
     cols: usize,
-) -> Result<Vec<(usize, Labelled)>, OrientError> {
+) -> Result<Indexed, OrientError> {
     let kept = trim_to_board(corners, rows as i32, cols as i32)?;
     let corners = kept.as_slice();
     let grid = Grid::new(corners);
@@ -100,19 +112,34 @@ pub fn assign_indices(
         .filter(|p| colour.is_none_or(|dark| board_cell_dark(p) == dark))
         .filter(|p| sides_agree(p, &grid, &sides, rows, cols))
         .collect();
-    let chosen = match fits.as_slice() {
+    let (chosen, by_symmetry) = match fits.as_slice() {
         [] => return Err(OrientError::NoFit),
-        [one] => *one,
-        many if grid.nu * grid.nv == rows * cols => most_rightward(many, eu, ev),
+        [one] => (*one, false),
+        many if grid.nu * grid.nv == rows * cols => (most_rightward(many, eu, ev), true),
+        [a, b] if turned_180(a, b, rows, cols) => (most_rightward(&[*a, *b], eu, ev), true),
         _ => return Err(OrientError::Ambiguous),
     };
-    Ok(corners
+    let corners = corners
         .iter()
         .map(|c| {
             let (col, row) = chosen.map(c.u - grid.u0, c.v - grid.v0);
             ((row * cols + col) as usize, *c)
         })
-        .collect())
+        .collect();
+    Ok(Indexed {
+        corners,
+        by_symmetry,
+    })
+}
+
+/// Whether placement `b` is placement `a` followed by turning the board by
+/// 180° (board corner (c, r) to (cols−1−c, rows−1−r)). Placements are affine,
+/// so three patch points decide it.
+fn turned_180(a: &Placement, b: &Placement, rows: i32, cols: i32) -> bool {
+    [(0, 0), (1, 0), (0, 1)].iter().all(|&(u, v)| {
+        let (c, r) = a.map(u, v);
+        b.map(u, v) == (cols - 1 - c, rows - 1 - r)
+    })
 }
 
 /// The detector sometimes labels a stray X-junction just outside the board

@@ -3,11 +3,13 @@
 //! Kept apart from mod.rs so the public types there stay readable; each step
 //! is a small function so failures map cleanly onto a `Rejection`.
 
+use crate::app::detect::grow;
 use crate::app::detect::orient::{self, Labelled, OrientError};
 use crate::app::detect::refine::{self, FloatImage};
 use crate::app::detect::{load, Corner, Detection, Detector, Rejection, SIGMA_REF};
 use calib_targets::chessboard::ChessboardParams;
 use calib_targets::detect as ct;
+use std::collections::HashMap;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
 /// Largest point-symmetry misfit accepted (clean corners are < 0.01; an
@@ -34,18 +36,7 @@ pub(crate) fn detect(
         Some(found) => found,
         None => return Err(classify_miss(&fimg)),
     };
-    let half = ((0.3 * cell).round() as usize).clamp(3, 12);
-    let refined: Vec<Labelled> = raw
-        .into_iter()
-        .filter_map(|c| {
-            let r = refine_checked(&fimg, c.uv, half)?;
-            Some(Labelled {
-                uv: r.uv,
-                sigma: r.sigma,
-                ..c
-            })
-        })
-        .collect();
+    let refined = grow::grow(&fimg, refine_all(&fimg, raw, cell), rows, cols);
     let needed = det.min_corners.min(rows * cols);
     if refined.len() < needed {
         // A handful of corners on a featureless-looking image is blur, not
@@ -63,6 +54,7 @@ pub(crate) fn detect(
         OrientError::Ambiguous => Rejection::PartialAmbiguous,
     })?;
     let mut corners: Vec<Corner> = indexed
+        .corners
         .into_iter()
         .map(|(index, c)| Corner {
             index,
@@ -79,14 +71,43 @@ pub(crate) fn detect(
         width,
         height,
         complete,
+        labelled_by_symmetry: indexed.by_symmetry,
     })
+}
+
+/// Refine every found corner, with a window shrunk to 0.4× its own spacing to
+/// its neighbours where that is smaller than the board-wide one (which would
+/// swallow the compressed squares near a fisheye's rim), dropping those that
+/// fail the checks.
+fn refine_all(fimg: &FloatImage, raw: Vec<Labelled>, cell: f64) -> Vec<Labelled> {
+    let at: HashMap<(i32, i32), [f64; 2]> = raw.iter().map(|c| ((c.u, c.v), c.uv)).collect();
+    raw.into_iter()
+        .filter_map(|c| {
+            // The board-wide window (0.3× the cell) unless this corner's own
+            // spacing asks for a smaller one: a larger window than that loses
+            // accuracy on ordinary boards (tests/photo_noise.rs).
+            let board_wide = ((0.3 * cell).round() as usize).clamp(3, 12);
+            let spacing = grow::local_spacing((c.u, c.v), &at).unwrap_or(cell);
+            let half = board_wide.min(grow::half_window(spacing));
+            let r = refine_checked(fimg, c.uv, half)?;
+            Some(Labelled {
+                uv: r.uv,
+                sigma: r.sigma,
+                ..c
+            })
+        })
+        .collect()
 }
 
 /// Refine, and keep only point-symmetric results: an occluder, clutter or a
 /// board edge inside the window drags cornerSubPix off the junction. A
 /// smaller window is tried before giving up, which rescues corners next to a
 /// thin outer row of squares.
-fn refine_checked(img: &FloatImage, start: [f64; 2], half: usize) -> Option<refine::Refined> {
+pub(crate) fn refine_checked(
+    img: &FloatImage,
+    start: [f64; 2],
+    half: usize,
+) -> Option<refine::Refined> {
     let first = refine::refine_corner(img, start, half);
     if let Some(r) = first.filter(|r| r.asymmetry <= MAX_ASYMMETRY) {
         return Some(r);
@@ -128,7 +149,7 @@ fn find_grid(gray: &image::GrayImage) -> Result<Option<(Vec<Labelled>, f64)>, Re
 /// For a Gaussian-blurred step, range / max gradient = σ·√(2π); we call the
 /// image blurred when that exceeds ~10 px (σ ≳ 4 px), which is where the ChESS
 /// detector stops responding.
-fn classify_miss(f: &FloatImage) -> Rejection {
+pub(crate) fn classify_miss(f: &FloatImage) -> Rejection {
     let (w, h) = (f.width, f.height);
     let mut grads = Vec::with_capacity(w * h / 4);
     for y in (1..h - 1).step_by(2) {

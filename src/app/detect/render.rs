@@ -13,10 +13,13 @@
 //! containing (−s/2, −s/2)) is dark; a white margin of one square surrounds
 //! the squares, and beyond that a mid-grey background.
 
+use crate::model::lens::{Intrinsics, LensModel};
 use image::{GrayImage, Luma};
+use nalgebra::Vector3;
 
 /// Pinhole camera with radial distortion on normalised coordinates:
-/// x_d = x · (1 + k1 r² + k2 r⁴).
+/// x_d = x · (1 + k1 r² + k2 r⁴): a shorthand for `radial3` intrinsics with
+/// k3 = 0 (`Intrinsics::from`).
 #[derive(Clone, Copy, Debug)]
 pub struct Camera {
     /// Focal length along u (px).
@@ -33,6 +36,12 @@ pub struct Camera {
     pub k2: f64,
 }
 
+impl From<Camera> for Intrinsics {
+    fn from(c: Camera) -> Intrinsics {
+        Intrinsics::radial3([c.fx, c.fy, c.cx, c.cy, c.k1, c.k2, 0.0])
+    }
+}
+
 /// Board-to-camera pose: X_cam = R(rvec) · X_board + t, rvec a Rodrigues vector.
 #[derive(Clone, Copy, Debug)]
 pub struct Pose {
@@ -46,8 +55,16 @@ pub struct Pose {
 /// positional arguments because callers vary a few fields at a time.
 #[derive(Clone, Debug)]
 pub struct Scene {
-    /// The camera.
-    pub camera: Camera,
+    /// The lens (any model of `model::lens`).
+    pub camera: Intrinsics,
+    /// Full field of view of a fisheye lens in degrees: rays more than half
+    /// of it off the optical axis are black, as outside a real fisheye's
+    /// image circle. 0 = no image circle.
+    pub image_circle_deg: f64,
+    /// Vignetting: brightness falls by this fraction at the image circle's
+    /// rim (or, without one, at the image corners), quadratically in the
+    /// angle off the axis. 0 = none.
+    pub vignetting: f64,
     /// Camera-from-board pose.
     pub pose: Pose,
     /// Parabolic bend: board z = bend · (1 − (2x/W − 1)²), W the inner-corner
@@ -74,16 +91,31 @@ pub struct Scene {
     pub supersample: u32,
 }
 
-const DARK: f64 = 30.0;
-const LIGHT: f64 = 220.0;
-const BACKGROUND: f64 = 110.0;
+/// Grey level of the board's dark squares.
+pub const DARK: f64 = 30.0;
+/// Grey level of the board's light squares and margin.
+pub const LIGHT: f64 = 220.0;
+/// Grey level of everything that is not the board.
+pub const BACKGROUND: f64 = 110.0;
+/// Outside a fisheye's image circle.
+const BLACK: f64 = 4.0;
 
 /// Render `scene`; returns the 8-bit image and, per inner corner index, its
 /// true pixel position (None when it projects outside the image or behind
 /// the camera).
 pub fn render_board(scene: &Scene) -> (GrayImage, Vec<Option<[f64; 2]>>) {
-    let rot = rodrigues(scene.pose.rvec);
-    let mut buf = sample_image(scene, &rot);
+    render_with_albedo(scene, &|bx, by| board_albedo(scene, bx, by))
+}
+
+/// Grey level (0..255) of the printed pattern at board point (bx, by).
+pub type Albedo<'a> = &'a (dyn Fn(f64, f64) -> f64 + Sync);
+
+/// [`render_board`] with another printed pattern: `albedo(bx, by)` is the grey
+/// level (0..255) at board point (bx, by) in the board frame above (a ChArUco
+/// board's, for example); the truth is still the scene's inner corners.
+pub fn render_with_albedo(scene: &Scene, albedo: Albedo) -> (GrayImage, Vec<Option<[f64; 2]>>) {
+    let optics = Optics::new(scene);
+    let mut buf = sample_image(scene, &optics, albedo);
     if scene.blur > 0.0 {
         gaussian_blur(
             &mut buf,
@@ -97,26 +129,50 @@ pub fn render_board(scene: &Scene) -> (GrayImage, Vec<Option<[f64; 2]>>) {
         let v = buf[y as usize * scene.width as usize + x as usize] + scene.noise * rng.gauss();
         Luma([v.round().clamp(0.0, 255.0) as u8])
     });
-    (img, truth(scene, &rot))
+    (img, truth(scene, &optics.rot))
 }
 
 /// Exact projections of the inner corners.
 fn truth(scene: &Scene, rot: &[[f64; 3]; 3]) -> Vec<Option<[f64; 2]>> {
-    let (w, h) = (scene.width as f64, scene.height as f64);
     (0..scene.rows * scene.cols)
         .map(|idx| {
-            let (r, c) = (idx / scene.cols, idx % scene.cols);
-            let bx = c as f64 * scene.spacing;
-            let by = r as f64 * scene.spacing;
-            let p = transform(rot, &scene.pose.t, [bx, by, bend_z(scene, bx)]);
-            let uv = project(&scene.camera, p)?;
-            let inside = uv[0] >= 0.0 && uv[1] >= 0.0 && uv[0] <= w - 1.0 && uv[1] <= h - 1.0;
-            inside.then_some(uv)
+            seen_at(
+                scene,
+                rot,
+                (idx % scene.cols) as f64,
+                (idx / scene.cols) as f64,
+            )
         })
         .collect()
 }
 
-fn sample_image(scene: &Scene, rot: &[[f64; 3]; 3]) -> Vec<f64> {
+/// Per inner corner: whether its four squares are wholly in the picture
+/// (their outer corners inside the image and the image circle), i.e. a
+/// detector could see the whole X-junction. Tests count found corners
+/// against these.
+pub fn fully_visible(scene: &Scene) -> Vec<bool> {
+    let rot = rodrigues(scene.pose.rvec);
+    (0..scene.rows * scene.cols)
+        .map(|idx| {
+            let (r, c) = ((idx / scene.cols) as f64, (idx % scene.cols) as f64);
+            [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)]
+                .iter()
+                .all(|(dc, dr)| seen_at(scene, &rot, c + dc, r + dr).is_some())
+        })
+        .collect()
+}
+
+/// Pixel position of board point (c, r)·spacing when it lies in the image.
+fn seen_at(scene: &Scene, rot: &[[f64; 3]; 3], c: f64, r: f64) -> Option<[f64; 2]> {
+    let (w, h) = (scene.width as f64, scene.height as f64);
+    let (bx, by) = (c * scene.spacing, r * scene.spacing);
+    let p = transform(rot, &scene.pose.t, [bx, by, bend_z(scene, bx)]);
+    let uv = project_seen(scene, p)?;
+    let inside = uv[0] >= 0.0 && uv[1] >= 0.0 && uv[0] <= w - 1.0 && uv[1] <= h - 1.0;
+    inside.then_some(uv)
+}
+
+fn sample_image(scene: &Scene, optics: &Optics, albedo: Albedo) -> Vec<f64> {
     let n = scene.supersample.max(1);
     let inv_n = 1.0 / n as f64;
     let mut out = Vec::with_capacity(scene.width as usize * scene.height as usize);
@@ -126,10 +182,10 @@ fn sample_image(scene: &Scene, rot: &[[f64; 3]; 3]) -> Vec<f64> {
             // inside one region (squares are many pixels wide), so only
             // pixels straddling an edge pay for the full n×n supersampling.
             let (xf, yf) = (x as f64, y as f64);
-            let centre = shade(scene, rot, xf, yf);
+            let centre = shade(scene, optics, albedo, xf, yf);
             let uniform = [(-0.5, -0.5), (0.5, -0.5), (-0.5, 0.5), (0.5, 0.5)]
                 .iter()
-                .all(|(dx, dy)| shade(scene, rot, xf + dx, yf + dy) == centre);
+                .all(|(dx, dy)| (shade(scene, optics, albedo, xf + dx, yf + dy) - centre).abs() < 0.5);
             if uniform {
                 out.push(centre);
                 continue;
@@ -139,7 +195,7 @@ fn sample_image(scene: &Scene, rot: &[[f64; 3]; 3]) -> Vec<f64> {
                 for sx in 0..n {
                     let u = xf + (sx as f64 + 0.5) * inv_n - 0.5;
                     let v = yf + (sy as f64 + 0.5) * inv_n - 0.5;
-                    acc += shade(scene, rot, u, v);
+                    acc += shade(scene, optics, albedo, u, v);
                 }
             }
             out.push(acc * inv_n * inv_n);
@@ -149,19 +205,27 @@ fn sample_image(scene: &Scene, rot: &[[f64; 3]; 3]) -> Vec<f64> {
 }
 
 /// Grey level seen along the ray through pixel position (u, v).
-fn shade(scene: &Scene, rot: &[[f64; 3]; 3], u: f64, v: f64) -> f64 {
-    let cam = &scene.camera;
-    let (xd, yd) = ((u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy);
-    let Some((x, y)) = undistort(cam, xd, yd) else {
-        return BACKGROUND;
+fn shade(scene: &Scene, optics: &Optics, albedo: Albedo, u: f64, v: f64) -> f64 {
+    let Some(ray) = optics.ray(scene, u, v) else {
+        return if scene.image_circle_deg > 0.0 {
+            BLACK
+        } else {
+            BACKGROUND
+        };
     };
-    // Ray d = (x, y, 1) in camera frame; express origin and direction in the
-    // board frame (R^T (X - t)) and intersect with the (bent) surface.
+    let theta = ray[0].hypot(ray[1]).atan2(ray[2]);
+    if optics.theta_max.is_some_and(|m| theta > m) {
+        return BLACK;
+    }
+    let light = 1.0 - scene.vignetting * (theta / optics.theta_ref).powi(2);
+    // Ray d in the camera frame; express origin and direction in the board
+    // frame (R^T (X - t)) and intersect with the (bent) surface.
+    let rot = &optics.rot;
     let t = scene.pose.t;
     let o = mul_t(rot, [-t[0], -t[1], -t[2]]);
-    let d = mul_t(rot, [x, y, 1.0]);
+    let d = mul_t(rot, ray);
     if d[2].abs() < 1e-12 {
-        return BACKGROUND;
+        return BACKGROUND * light;
     }
     // Fixed-point on z: intersect with plane z = z0, re-evaluate the bend there.
     let mut z0 = 0.0;
@@ -170,13 +234,126 @@ fn shade(scene: &Scene, rot: &[[f64; 3]; 3], u: f64, v: f64) -> f64 {
     for _ in 0..iters {
         let s = (z0 - o[2]) / d[2];
         if s <= 0.0 {
-            return BACKGROUND;
+            return BACKGROUND * light;
         }
         bx = o[0] + s * d[0];
         by = o[1] + s * d[1];
         z0 = bend_z(scene, bx);
     }
-    board_albedo(scene, bx, by)
+    albedo(bx, by) * light
+}
+
+/// What every ray of one picture shares: the board rotation, the image
+/// circle's half angle, the angle at which vignetting reaches its value, and
+/// for a fisheye lens its inverse as a table.
+struct Optics {
+    rot: [[f64; 3]; 3],
+    theta_max: Option<f64>,
+    theta_ref: f64,
+    fisheye: Option<RadialTable>,
+}
+
+/// A radially symmetric lens (`kb4`, `ds`) maps the angle θ off the axis to a
+/// radius ρ in normalised image coordinates ((u − cx)/fx, (v − cy)/fy).
+/// Sampling the model's own forward projection densely and interpolating θ(ρ)
+/// inverts it to ~1e-6 px for a fraction of the cost of the model's
+/// iterative inverse at every sub-sample.
+struct RadialTable {
+    /// (ρ, θ) with ρ strictly increasing.
+    samples: Vec<(f64, f64)>,
+}
+
+impl RadialTable {
+    const STEPS: usize = 8192;
+
+    fn new(cam: &Intrinsics, theta_end: f64) -> RadialTable {
+        let (fx, cx) = (cam.fx(), cam.cx());
+        let mut samples: Vec<(f64, f64)> = vec![(0.0, 0.0)];
+        for i in 1..=Self::STEPS {
+            let theta = theta_end * i as f64 / Self::STEPS as f64;
+            let ray = Vector3::new(theta.sin(), 0.0, theta.cos());
+            let Some(uv) = cam.project(&ray) else { break };
+            let rho = (uv.x - cx) / fx;
+            if rho <= samples.last().map_or(0.0, |s| s.0) {
+                break;
+            }
+            samples.push((rho, theta));
+        }
+        RadialTable { samples }
+    }
+
+    /// θ at normalised radius `rho`; None beyond the table (outside the
+    /// lens's valid field).
+    fn theta(&self, rho: f64) -> Option<f64> {
+        let i = self.samples.partition_point(|s| s.0 < rho);
+        if i == 0 {
+            return Some(0.0);
+        }
+        let (r1, t1) = *self.samples.get(i)?;
+        let (r0, t0) = self.samples[i - 1];
+        Some(t0 + (t1 - t0) * (rho - r0) / (r1 - r0))
+    }
+}
+
+impl Optics {
+    fn new(scene: &Scene) -> Optics {
+        let theta_max =
+            (scene.image_circle_deg > 0.0).then(|| scene.image_circle_deg.to_radians() / 2.0);
+        let cam = &scene.camera;
+        let fisheye = (cam.model() != LensModel::Radial3).then(|| {
+            // A little beyond the circle, so pixels at its rim interpolate.
+            let end = theta_max.map_or(std::f64::consts::PI * 0.999, |t| (t + 0.05).min(3.1));
+            RadialTable::new(cam, end)
+        });
+        let mut optics = Optics {
+            rot: rodrigues(scene.pose.rvec),
+            theta_max,
+            theta_ref: 1.0,
+            fisheye,
+        };
+        optics.theta_ref = theta_max.unwrap_or_else(|| {
+            let corner = optics.ray(scene, 0.0, 0.0).unwrap_or([1.0, 1.0, 1.0]);
+            corner[0].hypot(corner[1]).atan2(corner[2]).max(1e-3)
+        });
+        optics
+    }
+
+    /// The camera-frame ray through pixel (u, v); None where the lens maps
+    /// no ray there. `radial3` has a fast fixed-point inverse (it renders most
+    /// of the tests' photos); the fisheye models a table of their projection.
+    fn ray(&self, scene: &Scene, u: f64, v: f64) -> Option<[f64; 3]> {
+        let cam = &scene.camera;
+        if cam.model() == LensModel::Radial3 {
+            let p = cam.params();
+            let (xd, yd) = ((u - p[2]) / p[0], (v - p[3]) / p[1]);
+            let (x, y) = undistort_radial(p[4], p[5], p[6], xd, yd)?;
+            return Some([x, y, 1.0]);
+        }
+        let p = cam.params();
+        let m = [(u - p[2]) / p[0], (v - p[3]) / p[1]];
+        let rho = m[0].hypot(m[1]);
+        let theta = self.fisheye.as_ref()?.theta(rho)?;
+        if rho < 1e-12 {
+            return Some([0.0, 0.0, 1.0]);
+        }
+        let s = theta.sin() / rho;
+        Some([m[0] * s, m[1] * s, theta.cos()])
+    }
+}
+
+/// Pixel position of a camera-frame point as the picture shows it: None
+/// behind the lens or outside its image circle.
+fn project_seen(scene: &Scene, p: [f64; 3]) -> Option<[f64; 2]> {
+    if scene.image_circle_deg > 0.0 {
+        let theta = p[0].hypot(p[1]).atan2(p[2]);
+        if theta > scene.image_circle_deg.to_radians() / 2.0 {
+            return None;
+        }
+    } else if p[2] <= 1e-9 {
+        return None;
+    }
+    let uv = scene.camera.project(&Vector3::new(p[0], p[1], p[2]))?;
+    Some([uv.x, uv.y])
 }
 
 fn board_albedo(scene: &Scene, bx: f64, by: f64) -> f64 {
@@ -209,11 +386,11 @@ fn bend_z(scene: &Scene, bx: f64) -> f64 {
 
 /// Invert the radial model by fixed-point iteration (converges for the mild
 /// distortion used in tests); None if it diverges.
-fn undistort(cam: &Camera, xd: f64, yd: f64) -> Option<(f64, f64)> {
+fn undistort_radial(k1: f64, k2: f64, k3: f64, xd: f64, yd: f64) -> Option<(f64, f64)> {
     let (mut x, mut y) = (xd, yd);
     for _ in 0..50 {
         let r2 = x * x + y * y;
-        let f = 1.0 + cam.k1 * r2 + cam.k2 * r2 * r2;
+        let f = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
         if f <= 0.1 {
             return None;
         }
@@ -225,17 +402,6 @@ fn undistort(cam: &Camera, xd: f64, yd: f64) -> Option<(f64, f64)> {
         }
     }
     Some((x, y))
-}
-
-/// Project a camera-frame point to pixels; None behind the camera.
-pub fn project(cam: &Camera, p: [f64; 3]) -> Option<[f64; 2]> {
-    if p[2] <= 1e-9 {
-        return None;
-    }
-    let (x, y) = (p[0] / p[2], p[1] / p[2]);
-    let r2 = x * x + y * y;
-    let f = 1.0 + cam.k1 * r2 + cam.k2 * r2 * r2;
-    Some([cam.fx * x * f + cam.cx, cam.fy * y * f + cam.cy])
 }
 
 fn transform(rot: &[[f64; 3]; 3], t: &[f64; 3], p: [f64; 3]) -> [f64; 3] {

@@ -1,41 +1,29 @@
-//! COLMAP's `cameras.txt`: `CAMERA_ID MODEL WIDTH HEIGHT PARAMS[]` per camera, with
-//! `OPENCV` (fx fy cx cy k1 k2 p1 p2), `FULL_OPENCV` (… k3 k4 k5 k6) and
-//! `OPENCV_FISHEYE` (fx fy cx cy k1 k2 k3 k4). COLMAP puts the centre of the
+//! COLMAP's `cameras.txt`: `CAMERA_ID MODEL WIDTH HEIGHT PARAMS[]` per camera, in
+//! the COLMAP model the lens registry names (`LensInfo::colmap`), e.g. `OPENCV`
+//! (fx fy cx cy k1 k2 p1 p2), `FULL_OPENCV` (… k3 k4 k5 k6) or `OPENCV_FISHEYE`
+//! (fx fy cx cy k1 k2 k3 k4). COLMAP puts the centre of the
 //! top-left pixel at (0.5, 0.5) where OpenCV (and deformcal) put it at (0, 0), so
 //! cx and cy are written 0.5 larger. Camera k (from 0) is COLMAP camera k + 1.
-use super::{fmt, unrepresentable};
+use super::common::{fmt, unrepresentable};
 use crate::app::calibration_json::CalibrationJson;
 use crate::app::calibration_json::CameraJson;
-use crate::model::lens::LensModel;
 use std::fmt::Write;
 
 /// The file name.
 pub const COLMAP_FILE: &str = "cameras.txt";
 
-/// COLMAP's model and parameters of a camera; `None` where COLMAP has no model
-/// that holds it exactly (double sphere).
+/// COLMAP's model and parameters of a camera: the first of the registry's
+/// COLMAP forms of its lens model that holds it exactly; `None` where none does.
 fn colmap_model(c: &CameraJson) -> Option<(&'static str, Vec<f64>)> {
     let i = &c.intrinsics;
-    let g = |n: &str| i.get(n).unwrap_or(0.0);
+    let form = i.model().info().colmap.iter().find(|f| {
+        f.requires_zero
+            .iter()
+            .all(|n| i.get(n).unwrap_or(0.0) == 0.0)
+    })?;
     let mut params = vec![i.fx(), i.fy(), i.cx() + 0.5, i.cy() + 0.5];
-    let opencv = |k: &[&str]| k.iter().map(|n| g(n)).collect::<Vec<f64>>();
-    let model = match i.model() {
-        // OPENCV has no k3: a nonzero k3 needs FULL_OPENCV (k4..k6 = 0, exactly).
-        LensModel::Radial3 | LensModel::OpenCv5 if g("k3") == 0.0 => {
-            params.extend(opencv(&["k1", "k2", "p1", "p2"]));
-            "OPENCV"
-        }
-        LensModel::Radial3 | LensModel::OpenCv5 | LensModel::OpenCv8 => {
-            params.extend(opencv(&["k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"]));
-            "FULL_OPENCV"
-        }
-        LensModel::Kb4 => {
-            params.extend(opencv(&["k1", "k2", "k3", "k4"]));
-            "OPENCV_FISHEYE"
-        }
-        LensModel::DoubleSphere => return None,
-    };
-    Some((model, params))
+    params.extend(super::common::values(i, form.params));
+    Some((form.model, params))
 }
 
 /// The `cameras.txt` of a calibration; `None` when no camera can be written. A
@@ -52,7 +40,7 @@ pub fn cameras_txt(c: &CalibrationJson, warnings: &mut Vec<String>) -> Option<St
         lines.push(format!(
             "# camera {}: deformcal camera `{}` ({})",
             k + 1,
-            super::printable(&cam.name),
+            super::common::printable(&cam.name),
             cam.model
         ));
         lines.push(format!(

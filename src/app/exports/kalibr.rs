@@ -1,13 +1,13 @@
 //! Kalibr's `camchain.yaml`: `cam0`, `cam1`, … with `camera_model`, `intrinsics`,
 //! `distortion_model`, `distortion_coeffs`, `resolution`, and from `cam1` on
 //! `T_cn_cnm1`, the 4×4 transform from the previous camera in the chain to this
-//! one. Kalibr's models here: `pinhole-radtan` (k1 k2 p1 p2: radial3 and opencv5
-//! only when k3 is exactly 0), `pinhole-equi` (kb4) and `ds-none` (double sphere,
+//! one. Which Kalibr model holds which lens model is the lens registry's
+//! (`LensInfo::kalibr`): `pinhole-radtan` (k1 k2 p1 p2: radial3 and opencv5 only
+//! when k3 is exactly 0), `pinhole-equi` (kb4) and `ds-none` (double sphere,
 //! intrinsics [xi alpha fu fv pu pv]). Kalibr counts every top-level key as a
 //! camera, so each camera's deformcal name goes into a comment.
-use super::fmt;
+use super::common::fmt;
 use crate::app::calibration_json::{CalibrationJson, CameraJson};
-use crate::model::lens::LensModel;
 use crate::model::pose::Pose;
 use std::fmt::Write;
 
@@ -25,51 +25,29 @@ struct KalibrCamera {
 }
 
 /// Kalibr's camera model, intrinsics, distortion model and coefficients of a
-/// camera, or why Kalibr cannot hold it exactly.
+/// camera (the registry's Kalibr form), or why Kalibr cannot hold it exactly.
 fn kalibr_model(c: &CameraJson) -> Result<KalibrCamera, String> {
     let i = &c.intrinsics;
-    let g = |n: &str| i.get(n).unwrap_or(0.0);
-    let pinhole = vec![i.fx(), i.fy(), i.cx(), i.cy()];
-    match i.model() {
-        LensModel::Radial3 | LensModel::OpenCv5 => {
-            let k3 = g("k3");
-            if k3 != 0.0 {
-                return Err(format!(
-                    "{KALIBR_FILE}: camera `{}` is left out: Kalibr's pinhole-radtan has no k3 and `{}` has k3 = {}",
-                    super::printable(&c.name), c.model, fmt(k3)
-                ));
-            }
-            let d = vec![g("k1"), g("k2"), g("p1"), g("p2")];
-            Ok(KalibrCamera {
-                model: "pinhole",
-                intrinsics: pinhole,
-                distortion: "radtan",
-                coefficients: d,
-            })
-        }
-        LensModel::OpenCv8 => Err(format!(
-            "{KALIBR_FILE}: camera `{}` is left out: Kalibr has no rational (`opencv8`) lens model",
-            super::printable(&c.name)
-        )),
-        LensModel::Kb4 => {
-            let d = vec![g("k1"), g("k2"), g("k3"), g("k4")];
-            Ok(KalibrCamera {
-                model: "pinhole",
-                intrinsics: pinhole,
-                distortion: "equidistant",
-                coefficients: d,
-            })
-        }
-        LensModel::DoubleSphere => {
-            let v = vec![g("xi"), g("alpha"), i.fx(), i.fy(), i.cx(), i.cy()];
-            Ok(KalibrCamera {
-                model: "ds",
-                intrinsics: v,
-                distortion: "none",
-                coefficients: Vec::new(),
-            })
+    let form = i
+        .model()
+        .info()
+        .kalibr
+        .ok_or_else(|| super::common::unrepresentable(KALIBR_FILE, c))?;
+    for &name in form.requires_zero {
+        let v = i.get(name).unwrap_or(0.0);
+        if v != 0.0 {
+            return Err(format!(
+                "{KALIBR_FILE}: camera `{}` is left out: Kalibr's {} has no {name} and `{}` has {name} = {}",
+                super::common::printable(&c.name), form.name, c.model, fmt(v)
+            ));
         }
     }
+    Ok(KalibrCamera {
+        model: form.camera_model,
+        intrinsics: super::common::values(i, form.intrinsics),
+        distortion: form.distortion_model,
+        coefficients: super::common::values(i, form.coefficients),
+    })
 }
 
 fn list(values: &[f64]) -> String {
@@ -111,7 +89,7 @@ pub fn camchain_yaml(c: &CalibrationJson, warnings: &mut Vec<String>) -> Option<
         let _ = writeln!(
             s,
             "# cam{n}: deformcal camera `{}` ({})",
-            super::printable(&cam.name),
+            super::common::printable(&cam.name),
             cam.model
         );
         let _ = writeln!(s, "cam{n}:");
@@ -123,7 +101,11 @@ pub fn camchain_yaml(c: &CalibrationJson, warnings: &mut Vec<String>) -> Option<
         let _ = writeln!(s, "  distortion_model: {}", k.distortion);
         let _ = writeln!(s, "  distortion_coeffs: {}", list(&k.coefficients));
         let _ = writeln!(s, "  resolution: [{}, {}]", cam.width, cam.height);
-        let _ = writeln!(s, "  rostopic: /{}/image_raw", super::key_of(&cam.name));
+        let _ = writeln!(
+            s,
+            "  rostopic: /{}/image_raw",
+            super::common::key_of(&cam.name)
+        );
         previous = Some(cam);
         n += 1;
     }

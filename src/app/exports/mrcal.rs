@@ -1,29 +1,15 @@
 //! mrcal `.cameramodel` files, one per camera, with the calibration problem as
 //! `optimization_inputs` where mrcal can represent it (see `mrcal_inputs`).
-use super::fmt;
+use super::common::fmt;
 use super::mrcal_inputs::OptimizationInputs;
 use crate::app::calibration_json::CameraJson;
-use crate::model::lens::{Intrinsics, LensModel};
-
-/// The lens model whose parameters mrcal's model of `model` has, in mrcal's order:
-/// radial3 is LENSMODEL_OPENCV5 with p1 = p2 = 0, exactly; `None` where mrcal has
-/// no such model.
-pub fn mrcal_equivalent(model: LensModel) -> Option<LensModel> {
-    match model {
-        LensModel::Radial3 => Some(LensModel::OpenCv5),
-        m => m.info().mrcal.map(|_| m),
-    }
-}
+use crate::model::lens::Intrinsics;
 
 /// mrcal's lens model name and intrinsics vector of `i`, where mrcal has its model;
 /// parameters the model lacks (radial3's p1, p2) are 0.
 pub fn mrcal_lens(i: &Intrinsics) -> Option<(&'static str, Vec<f64>)> {
-    let m = mrcal_equivalent(i.model())?;
-    let values = m
-        .param_names()
-        .iter()
-        .map(|n| i.get(n).unwrap_or(0.0))
-        .collect();
+    let m = i.model().mrcal_equivalent()?;
+    let values = super::common::values(i, m.param_names());
     Some((m.info().mrcal?, values))
 }
 
@@ -47,14 +33,17 @@ pub fn mrcal_cameramodel(
         OptimizationInputs::Carried { blob, note } => {
             let note = note
                 .as_ref()
-                .map(|n| format!("    # note: {}\n", super::printable(n)))
+                .map(|n| format!("    # note: {}\n", super::common::printable(n)))
                 .unwrap_or_default();
             format!(
                 "    # the calibration problem as mrcal's optimize() takes it (numpy savez, base85)\n{note}    'icam_intrinsics': {icam},\n    'optimization_inputs': b'{blob}',\n"
             )
         }
         OptimizationInputs::Absent(why) => {
-            format!("    # no optimization_inputs: {}\n", super::printable(why))
+            format!(
+                "    # no optimization_inputs: {}\n",
+                super::common::printable(why)
+            )
         }
     };
     Some(format!(

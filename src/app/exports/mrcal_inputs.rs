@@ -3,7 +3,6 @@
 //! tools work on our models. Only where mrcal's problem is ours: a rigid board
 //! (`standard`) and cameras of one lens model mrcal has. This module maps the
 //! conventions; `npz` formats the bytes.
-use super::mrcal::mrcal_equivalent;
 use super::npz::{b85encode, npz, Npy};
 use crate::model::dataset::Dataset;
 use crate::model::lens::LensModel;
@@ -165,7 +164,7 @@ fn board_change(method: crate::model::board::Method) -> &'static str {
 fn common_model(d: &Dataset) -> Result<LensModel, String> {
     let mut model = None;
     for cam in &d.cameras {
-        let m = mrcal_equivalent(cam.model).ok_or_else(|| {
+        let m = cam.model.mrcal_equivalent().ok_or_else(|| {
             format!(
                 "mrcal has no `{}` lens model (camera `{}`)",
                 cam.model, cam.name

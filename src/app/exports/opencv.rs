@@ -1,8 +1,8 @@
 //! OpenCV FileStorage YAML (`opencv.yaml`, docs/conventions.md §5): what `cv::FileStorage` and
 //! `calibrateCamera`'s users read.
-use super::{fmt, key_of, unrepresentable};
+use super::common::{fmt, key_of, unrepresentable};
 use crate::app::calibration_json::{CalibrationJson, CameraJson};
-use crate::model::lens::{Intrinsics, LensModel};
+use crate::model::lens::{Intrinsics, OpenCvForm};
 use crate::model::pose::Pose;
 use std::fmt::Write;
 
@@ -14,25 +14,18 @@ fn matrix(name: &str, rows: usize, cols: usize, data: &[f64]) -> String {
     )
 }
 
-/// OpenCV's name and coefficient vector of a lens model, where OpenCV has it:
-/// `calibrateCamera`'s k1 k2 p1 p2 k3 [k4 k5 k6], or `cv::fisheye`'s k1..k4.
-pub(super) fn opencv_distortion(i: &Intrinsics) -> Option<(&'static str, Vec<f64>)> {
-    let g = |n: &str| i.get(n).unwrap_or(0.0);
-    let (name, keys): (&str, &[&str]) = match i.model() {
-        LensModel::Radial3 | LensModel::OpenCv5 => ("plumb_bob", &["k1", "k2", "p1", "p2", "k3"]),
-        LensModel::OpenCv8 => (
-            "rational_polynomial",
-            &["k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"],
-        ),
-        LensModel::Kb4 => ("fisheye", &["k1", "k2", "k3", "k4"]),
-        LensModel::DoubleSphere => return None,
-    };
-    Some((name, keys.iter().map(|k| g(k)).collect()))
+/// OpenCV's form of a lens model (the registry's), where OpenCV has it, and its
+/// coefficient vector: `calibrateCamera`'s k1 k2 p1 p2 k3 [k4 k5 k6], or
+/// `cv::fisheye`'s k1..k4.
+pub(super) fn opencv_distortion(i: &Intrinsics) -> Option<(OpenCvForm, Vec<f64>)> {
+    let form = i.model().info().opencv?;
+    Some((form, super::common::values(i, form.coefficients)))
 }
 
 fn camera_block(prefix: &str, c: &CameraJson, rmse: f64) -> Option<String> {
     let i = &c.intrinsics;
-    let (model, coefficients) = opencv_distortion(i)?;
+    let (form, coefficients) = opencv_distortion(i)?;
+    let model = form.distortion_model;
     let mut s = String::new();
     let _ = writeln!(s, "{prefix}image_width: {}", c.width);
     let _ = writeln!(s, "{prefix}image_height: {}", c.height);

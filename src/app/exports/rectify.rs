@@ -9,7 +9,7 @@
 //! five fixed-point iterations in single precision; this copy keeps those steps
 //! and roundings, because they move the principal point by up to 1e-4 px and the
 //! result must agree with `cv2.stereoRectify` to 1e-9 relative.
-use crate::model::lens::{Intrinsics, LensModel};
+use crate::model::lens::Intrinsics;
 use nalgebra::{Matrix3, Matrix3x4, Rotation3, Vector3};
 
 /// The rectification of a stereo pair: rotations from each camera into its
@@ -26,23 +26,13 @@ pub struct Rectification {
     pub p2: Matrix3x4<f64>,
 }
 
-/// OpenCV's distortion vector (k1 k2 p1 p2 k3 k4 k5 k6) of a pinhole-like model;
-/// `None` for the fisheye models, which `stereoRectify` does not take.
+/// OpenCV's distortion vector (k1 k2 p1 p2 k3 k4 k5 k6) of a model that
+/// `calibrateCamera` has (the registry's OpenCV form, not `cv::fisheye`); `None`
+/// for the others, which `stereoRectify` does not take.
 fn opencv_coefficients(i: &Intrinsics) -> Option<[f64; 8]> {
-    let g = |n: &str| i.get(n).unwrap_or(0.0);
-    match i.model() {
-        LensModel::Radial3 | LensModel::OpenCv5 | LensModel::OpenCv8 => Some([
-            g("k1"),
-            g("k2"),
-            g("p1"),
-            g("p2"),
-            g("k3"),
-            g("k4"),
-            g("k5"),
-            g("k6"),
-        ]),
-        LensModel::Kb4 | LensModel::DoubleSphere => None,
-    }
+    i.model().info().opencv.filter(|f| !f.fisheye)?;
+    let v = super::common::values(i, &["k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"]);
+    v.try_into().ok()
 }
 
 /// `cv::undistortPoints` without R and P: five fixed-point iterations, as OpenCV

@@ -5,9 +5,9 @@
 //! sphere. For exactly two pinhole-like cameras the rectification matrices and
 //! projections are those of OpenCV's `stereoRectify` (see [`super::rectify`]);
 //! otherwise each camera is monocular: R = I and P = [K | 0].
+use super::common::{file_stem, fmt, key_of};
 use super::opencv::opencv_distortion;
 use super::rectify::stereo_rectify;
-use super::{file_stem, fmt, key_of};
 use crate::app::calibration_json::{CalibrationJson, CameraJson};
 use nalgebra::{Matrix3, Matrix3x4};
 use std::fmt::Write;
@@ -38,13 +38,10 @@ fn row_major<const C: usize>(m: &nalgebra::SMatrix<f64, 3, C>) -> Vec<f64> {
 /// One camera's file, or `None` where ROS has no such lens model.
 fn camera_info(c: &CameraJson, r: &Matrix3<f64>, p: &Matrix3x4<f64>) -> Option<String> {
     let i = &c.intrinsics;
-    let (model, coefficients) = opencv_distortion(i)?;
-    // OpenCV calls Kannala-Brandt `fisheye`; ROS calls the same model `equidistant`.
-    let model = if model == "fisheye" {
-        "equidistant"
-    } else {
-        model
-    };
+    // ROS names the model its own way (`equidistant` for OpenCV's `fisheye`) and
+    // takes OpenCV's coefficients.
+    let model = i.model().info().ros?;
+    let (_, coefficients) = opencv_distortion(i)?;
     let mut s = String::new();
     let _ = writeln!(s, "image_width: {}", c.width);
     let _ = writeln!(s, "image_height: {}", c.height);
@@ -93,7 +90,7 @@ fn rectifications(
         }
         warnings.push(format!(
             "ROS camera_info: no stereo rectification for `{}` ({}) and `{}` ({}): OpenCV's stereoRectify needs two pinhole-like cameras of one image size; each file has R = I, P = [K | 0]",
-            super::printable(&a.name), a.model, super::printable(&b.name), b.model
+            super::common::printable(&a.name), a.model, super::common::printable(&b.name), b.model
         ));
     }
     c.cameras.iter().map(mono).collect()
@@ -110,7 +107,7 @@ pub fn camera_infos(c: &CalibrationJson, warnings: &mut Vec<String>) -> Vec<(Str
             Some(text) => files.push((file, text)),
             None => warnings.push(format!(
                 "{}: not written: ROS has no `{}` lens model",
-                super::printable(&file),
+                super::common::printable(&file),
                 cam.model
             )),
         }

@@ -54,6 +54,7 @@ pub struct PhotoRun {
 pub fn detect_photos(
     source: &DataSource,
     target: Target,
+    charuco: Option<&detect::charuco::CharucoSpec>,
     cameras: &[CameraSpec],
     output_dir: &Path,
     progress: bool,
@@ -62,7 +63,10 @@ pub fn detect_photos(
         return Err(Error::Invalid("not a photos data source".into()));
     };
     let files = list::list_photos(base, patterns, cameras)?;
-    let detector = Detector::default();
+    let detector = Detector {
+        charuco: charuco.cloned(),
+        ..Detector::default()
+    };
     let settings = settings_key(&detector, target);
     let mut cache = Cache::load(output_dir, &settings);
     let detected = detect_all(&files, &detector, target, &cache, progress);
@@ -108,12 +112,16 @@ struct Detected {
 /// values is not used.
 fn settings_key(d: &Detector, target: Target) -> String {
     format!(
-        "{}; rows {} cols {}; max_pixels {} min_corners {}",
+        "{}; rows {} cols {}; max_pixels {} min_corners {}{}",
         detect::ALGORITHM,
         target.rows,
         target.cols,
         d.max_pixels,
-        d.min_corners
+        d.min_corners,
+        d.charuco
+            .as_ref()
+            .map(|c| format!("; charuco {c:?}"))
+            .unwrap_or_default()
     )
 }
 
@@ -223,7 +231,7 @@ fn outcome_of(det: std::result::Result<Detection, Rejection>, width: u32, height
             } else {
                 Status::Partial
             },
-            reason: String::new(),
+            reason: d.note().to_string(),
             corners: d
                 .corners
                 .iter()

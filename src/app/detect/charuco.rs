@@ -1,0 +1,322 @@
+//! ChArUco boards in OpenCV's layout: the board's description, its detection
+//! (calib-targets finds the grid and decodes the markers, our refinement makes
+//! the corners sub-pixel) and the board's printed appearance, which the
+//! renderer and the printable target share. No file I/O, no config parsing.
+//!
+//! Numbering (docs/conventions.md, ChArUco boards): a board of `rows × cols`
+//! squares has `(rows−1) × (cols−1)` inner corners; corner id
+//! `r·(cols−1) + c` is inner corner (r, c) counted from the top-left, as
+//! OpenCV numbers ChArUco corners. The top-left square is black and the
+//! markers sit on the white squares, numbered row by row (OpenCV ≥ 4.6).
+//! In deformcal's board frame corner id `i` is corner `i` of a chessboard
+//! target of `rows−1 × cols−1` inner corners, so every method, lens model and
+//! export works on ChArUco data unchanged.
+
+use crate::app::detect::pipeline::{classify_miss, refine_checked};
+use crate::app::detect::{load, Corner, Detection, Detector, Rejection, SIGMA_REF};
+use crate::model::target::Target;
+use calib_targets::aruco::builtins::{builtin_dictionary, BUILTIN_DICTIONARY_NAMES};
+use calib_targets::charuco::{CharucoBoardSpec, CharucoDetection, CharucoParams};
+use calib_targets::detect as ct;
+use calib_targets::printable::{board_primitives, CharucoTargetSpec, Fill, Primitive, TargetSpec};
+use std::panic::{catch_unwind, AssertUnwindSafe};
+
+/// A ChArUco board: squares, their size and the markers' (metres), and the
+/// marker dictionary in OpenCV's spelling (`DICT_5X5_100`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct CharucoSpec {
+    /// Squares per column.
+    pub rows: usize,
+    /// Squares per row.
+    pub cols: usize,
+    /// Square side, metres.
+    pub square: f64,
+    /// Marker side, metres.
+    pub marker: f64,
+    /// Dictionary name as OpenCV spells it.
+    pub dictionary: String,
+}
+
+/// Most squares a side may have: a dictionary of 1000 markers fills 44 × 44.
+pub const MAX_SQUARES: usize = 200;
+
+impl CharucoSpec {
+    /// The inner-corner board the solver sees (ids are its corner indices).
+    pub fn target(&self) -> Target {
+        Target {
+            rows: self.rows.saturating_sub(1),
+            cols: self.cols.saturating_sub(1),
+            spacing: self.square,
+        }
+    }
+
+    /// Number of markers: one on every white square.
+    pub fn num_markers(&self) -> usize {
+        self.rows * self.cols / 2
+    }
+
+    /// Why this cannot be a ChArUco board, as `key message` for `[target]`.
+    pub fn problem(&self) -> Option<String> {
+        if self.rows < 3 || self.cols < 3 || self.rows > MAX_SQUARES || self.cols > MAX_SQUARES {
+            return Some(format!(
+                "rows and cols count squares and must be 3 to {MAX_SQUARES} (got {} × {})",
+                self.rows, self.cols
+            ));
+        }
+        let Some(dict) = builtin_dictionary(&self.dictionary) else {
+            return Some(format!(
+                "dictionary `{}` is not one of OpenCV's: {}",
+                self.dictionary,
+                BUILTIN_DICTIONARY_NAMES.join(", ")
+            ));
+        };
+        if dict.codes().len() < self.num_markers() {
+            return Some(format!(
+                "dictionary `{}` has {} markers, a board of {} × {} squares needs {}",
+                self.dictionary,
+                dict.codes().len(),
+                self.rows,
+                self.cols,
+                self.num_markers()
+            ));
+        }
+        if !(self.marker > 0.0 && self.marker < self.square) {
+            return Some(format!(
+                "marker must be larger than 0 and smaller than square ({} m), got {} m",
+                self.square, self.marker
+            ));
+        }
+        None
+    }
+
+    /// calib-targets' description of the board (sizes in millimetres).
+    fn board_spec(&self) -> Option<CharucoBoardSpec> {
+        let dict = builtin_dictionary(&self.dictionary)?;
+        Some(CharucoBoardSpec::new(
+            self.rows as u32,
+            self.cols as u32,
+            (self.square * 1000.0) as f32,
+            (self.marker / self.square) as f32,
+            dict,
+        ))
+    }
+
+    /// The printable board's black and white rectangles in millimetres, origin
+    /// at the board's top-left outer corner (x right, y down), from calib-targets'
+    /// printable-target generator.
+    pub fn primitives(&self) -> Option<Vec<Primitive>> {
+        let dict = builtin_dictionary(&self.dictionary)?;
+        let spec = CharucoTargetSpec::new(
+            self.rows as u32,
+            self.cols as u32,
+            self.square * 1000.0,
+            self.marker / self.square,
+            dict,
+        );
+        board_primitives(&TargetSpec::Charuco(spec)).ok()
+    }
+}
+
+/// The board's reflectance at a point of deformcal's board frame (metres, origin
+/// at corner 0, see the module doc): `dark`/`light` on the board, `None` off
+/// it. Built once (rectangles bucketed by square), then cheap per ray.
+pub struct Albedo {
+    square: f64,
+    cols: usize,
+    rows: usize,
+    /// Per square (row-major): the rectangles inside it in painting order,
+    /// as (x0, y0, x1, y1, black) in metres from the board's outer corner.
+    buckets: Vec<Vec<(f64, f64, f64, f64, bool)>>,
+}
+
+impl Albedo {
+    /// The board's appearance, or None for a board [`CharucoSpec::problem`] refuses.
+    pub fn new(spec: &CharucoSpec) -> Option<Albedo> {
+        let prims = spec.primitives()?;
+        let mut buckets = vec![Vec::new(); spec.rows * spec.cols];
+        for p in prims {
+            let Primitive::Rect {
+                x_mm,
+                y_mm,
+                width_mm,
+                height_mm,
+                fill,
+            } = p
+            else {
+                continue;
+            };
+            let rect = (
+                x_mm / 1000.0,
+                y_mm / 1000.0,
+                (x_mm + width_mm) / 1000.0,
+                (y_mm + height_mm) / 1000.0,
+                fill == Fill::Black,
+            );
+            let cx = ((rect.0 + rect.2) / 2.0 / spec.square).floor() as usize;
+            let cy = ((rect.1 + rect.3) / 2.0 / spec.square).floor() as usize;
+            if cx < spec.cols && cy < spec.rows {
+                buckets[cy * spec.cols + cx].push(rect);
+            }
+        }
+        Some(Albedo {
+            square: spec.square,
+            cols: spec.cols,
+            rows: spec.rows,
+            buckets,
+        })
+    }
+
+    /// Black (true) or white (false) at board point (bx, by), metres from
+    /// corner 0; None off the squares.
+    pub fn is_black(&self, bx: f64, by: f64) -> Option<bool> {
+        let (x, y) = (bx + self.square, by + self.square);
+        let (cx, cy) = ((x / self.square).floor(), (y / self.square).floor());
+        if cx < 0.0 || cy < 0.0 || cx >= self.cols as f64 || cy >= self.rows as f64 {
+            return None;
+        }
+        let bucket = &self.buckets[cy as usize * self.cols + cx as usize];
+        bucket
+            .iter()
+            .rev()
+            .find(|r| x >= r.0 && x < r.2 && y >= r.1 && y < r.3)
+            .map(|r| r.4)
+    }
+
+    /// The renderer's grey level at (bx, by): the board's squares and markers,
+    /// a white margin of one square around them, the background beyond.
+    pub fn grey(&self, bx: f64, by: f64) -> f64 {
+        use crate::app::detect::render::{BACKGROUND, DARK, LIGHT};
+        match self.is_black(bx, by) {
+            Some(true) => DARK,
+            Some(false) => LIGHT,
+            None => {
+                let (x, y) = (bx / self.square + 1.0, by / self.square + 1.0);
+                let margin = x >= -1.0
+                    && y >= -1.0
+                    && x <= self.cols as f64 + 1.0
+                    && y <= self.rows as f64 + 1.0;
+                if margin {
+                    LIGHT
+                } else {
+                    BACKGROUND
+                }
+            }
+        }
+    }
+}
+
+/// Detect a ChArUco board: calib-targets' grid and markers, then our sub-pixel
+/// refinement in a window that stays clear of the markers.
+pub(crate) fn detect(
+    det: &Detector,
+    spec: &CharucoSpec,
+    img: &image::DynamicImage,
+) -> Result<Detection, Rejection> {
+    let target = spec.target();
+    let board = spec.board_spec().ok_or(Rejection::InvalidPattern {
+        rows: spec.rows,
+        cols: spec.cols,
+    })?;
+    let (width, height) = (img.width(), img.height());
+    load::check_size(width, height, det.max_pixels)?;
+    if width < 8 || height < 8 {
+        return Err(Rejection::NoBoard);
+    }
+    let fimg = load::to_float(img);
+    let gray = load::to_gray8(&fimg);
+    let Some(found) = find_board(&gray, board)? else {
+        return Err(classify_miss(&fimg));
+    };
+    let n = target.num_corners();
+    let cell = median_cell_px(&found);
+    // The refinement window must not reach the markers: a marker's edges in
+    // the window pull the gradient fit off the junction and break the point
+    // symmetry the refinement checks. The gap between a corner and the
+    // nearest marker is (square − marker)/2 along both axes.
+    let gap = 0.5 * (1.0 - spec.marker / spec.square);
+    let mut corners: Vec<Corner> = found
+        .corners
+        .iter()
+        .filter(|c| (c.id as usize) < n)
+        .filter_map(|c| {
+            let start = [c.position.x as f64, c.position.y as f64];
+            let local = local_cell_px(&found, c.grid.u, c.grid.v, start).unwrap_or(cell);
+            let half = ((0.8 * gap * local).floor() as usize).clamp(2, 12);
+            let r = refine_checked(&fimg, start, half)?;
+            Some(Corner {
+                index: c.id as usize,
+                uv: r.uv,
+                sigma: r.sigma,
+                weight: 1.0 / (1.0 + (r.sigma / SIGMA_REF).powi(2)),
+            })
+        })
+        .collect();
+    corners.sort_by_key(|c| c.index);
+    corners.dedup_by_key(|c| c.index);
+    let needed = det.min_corners.min(n);
+    if corners.len() < needed {
+        return Err(Rejection::TooFewCorners {
+            found: corners.len(),
+            needed,
+        });
+    }
+    let complete = corners.len() == n;
+    Ok(Detection {
+        corners,
+        width,
+        height,
+        complete,
+        // Marker ids fix a ChArUco board's orientation.
+        labelled_by_symmetry: false,
+    })
+}
+
+/// calib-targets' ChArUco detector, its panics turned into a rejection.
+fn find_board(
+    gray: &image::GrayImage,
+    board: CharucoBoardSpec,
+) -> Result<Option<CharucoDetection>, Rejection> {
+    let run = || {
+        let params = CharucoParams::for_board(board);
+        ct::detect_charuco(gray, &params).ok()
+    };
+    catch_unwind(AssertUnwindSafe(run)).map_err(|p| {
+        let msg = p
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| p.downcast_ref::<String>().cloned())
+            .unwrap_or_default();
+        Rejection::Internal(format!("calib-targets panicked: {msg}"))
+    })
+}
+
+/// Median distance between grid neighbours, px (the square's size in the image).
+fn median_cell_px(found: &CharucoDetection) -> f64 {
+    let mut d: Vec<f64> = found
+        .corners
+        .iter()
+        .filter_map(|c| {
+            local_cell_px(
+                found,
+                c.grid.u,
+                c.grid.v,
+                [c.position.x as f64, c.position.y as f64],
+            )
+        })
+        .collect();
+    if d.is_empty() {
+        return 20.0;
+    }
+    d.sort_by(f64::total_cmp);
+    d[d.len() / 2]
+}
+
+/// Shortest distance from the corner at grid (u, v) to a found grid neighbour.
+fn local_cell_px(found: &CharucoDetection, u: i32, v: i32, at: [f64; 2]) -> Option<f64> {
+    found
+        .corners
+        .iter()
+        .filter(|o| (o.grid.u - u).abs() + (o.grid.v - v).abs() == 1)
+        .map(|o| (o.position.x as f64 - at[0]).hypot(o.position.y as f64 - at[1]))
+        .min_by(f64::total_cmp)
+}
