@@ -1,30 +1,14 @@
 //! Planning a run: the data loaded, the subsets drawn, the header written;
 //! the reference calibration is `run`'s.
-use crate::app::board_json::BoardJson;
 use crate::app::config::{Config, ProtocolConfig, MAX_SUBSETS};
-use crate::app::sfm::{Experiment, SfmConfig};
+use crate::app::sfm::Experiment;
 use crate::error::{Error, Result};
-use crate::model::board::{HigherBend, Method, Paraboloid};
-use crate::model::camera::CameraSpec;
-use crate::model::dataset::Dataset;
-use crate::model::lens::Intrinsics;
-use crate::model::metrics::{grid_rays, mapping_error_of, mapping_error_rot_of};
-use crate::model::selection::{AutoSettings, Selection};
-use crate::model::state::State;
-use crate::model::synthetic::Truth;
-use crate::model::target::Target;
-use crate::model::uncertainty::CameraUncertainty;
-use crate::solver::calibrate::{calibrate, Calibration, Request, SharedWarmStart};
-use crate::solver::problem::{rmse, Hold, PreparedRefit, Problem, SolverSettings};
-use crate::solver::select::calibrate_auto_sharing;
+use crate::model::selection::AutoSettings;
+use crate::solver::problem::SolverSettings;
 use super::record::{data_fingerprint, AutoRun, Header};
 use super::run::{no_sfm_camera, Measures, Plan, Setup};
 use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::OnceLock;
 
 /// Draws `subsets` subsets of `k` distinct frames out of `n`, each sorted.
 ///

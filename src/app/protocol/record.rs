@@ -1,28 +1,15 @@
 //! What a protocol run records: the header a merge checks, one row per
 //! subset × method task with its per-camera figures, the reference's summary.
 use crate::app::board_json::BoardJson;
-use crate::app::config::{Config, ProtocolConfig, MAX_SUBSETS};
-use crate::app::sfm::{Experiment, SfmConfig};
+use crate::app::config::MAX_SUBSETS;
 use crate::error::{Error, Result};
 use crate::model::board::{HigherBend, Method, Paraboloid};
 use crate::model::camera::CameraSpec;
 use crate::model::dataset::Dataset;
 use crate::model::lens::Intrinsics;
-use crate::model::metrics::{grid_rays, mapping_error_of, mapping_error_rot_of};
-use crate::model::selection::{AutoSettings, Selection};
-use crate::model::state::State;
-use crate::model::synthetic::Truth;
+use crate::model::selection::Selection;
 use crate::model::target::Target;
-use crate::model::uncertainty::CameraUncertainty;
-use crate::solver::calibrate::{calibrate, Calibration, Request, SharedWarmStart};
-use crate::solver::problem::{rmse, Hold, PreparedRefit, Problem, SolverSettings};
-use crate::solver::select::calibrate_auto_sharing;
-use rand::{RngCore, SeedableRng};
-use rand_chacha::ChaCha8Rng;
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::OnceLock;
 
 /// What a merge needs to know about the run that produced a set of rows.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

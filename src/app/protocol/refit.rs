@@ -1,28 +1,12 @@
 //! The test error: a calibration's intrinsics held on the reference set while
 //! only the board poses are refitted (the paper's test RMSE).
-use crate::app::board_json::BoardJson;
-use crate::app::config::{Config, ProtocolConfig};
-use crate::app::sfm::{Experiment, SfmConfig};
 use crate::error::{Error, Result};
-use crate::model::board::{HigherBend, Method, Paraboloid};
-use crate::model::camera::CameraSpec;
+use crate::model::board::Method;
 use crate::model::dataset::Dataset;
 use crate::model::lens::Intrinsics;
-use crate::model::metrics::{grid_rays, mapping_error_of, mapping_error_rot_of};
-use crate::model::selection::{AutoSettings, Selection};
 use crate::model::state::State;
-use crate::model::synthetic::Truth;
-use crate::model::target::Target;
-use crate::model::uncertainty::CameraUncertainty;
-use crate::solver::calibrate::{calibrate, Calibration, Request, SharedWarmStart};
+use crate::solver::calibrate::Calibration;
 use crate::solver::problem::{rmse, Hold, PreparedRefit, Problem, SolverSettings};
-use crate::solver::select::calibrate_auto_sharing;
-use rand::{RngCore, SeedableRng};
-use rand_chacha::ChaCha8Rng;
-use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::OnceLock;
 
 /// `test_rmse_px` of camera `k`: its views of the reference set refitted with only
 /// the board poses free, the given intrinsics and the reference static correction

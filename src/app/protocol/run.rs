@@ -1,30 +1,22 @@
 //! Running the tasks: the reference calibration and what rows are measured
 //! against, each subset × method calibrated (sharing its subset's warm start)
 //! and turned into a row, in parallel and beside the reference.
-use crate::app::board_json::BoardJson;
-use crate::app::config::{Config, ProtocolConfig};
 use crate::app::sfm::{Experiment, SfmConfig};
 use crate::error::{Error, Result};
-use crate::model::board::{HigherBend, Method, Paraboloid};
-use crate::model::camera::CameraSpec;
+use crate::model::board::Method;
 use crate::model::dataset::Dataset;
 use crate::model::lens::Intrinsics;
 use crate::model::metrics::{grid_rays, mapping_error_of, mapping_error_rot_of};
-use crate::model::selection::{AutoSettings, Selection};
-use crate::model::state::State;
+use crate::model::selection::AutoSettings;
 use crate::model::synthetic::Truth;
-use crate::model::target::Target;
 use crate::model::uncertainty::CameraUncertainty;
 use crate::solver::calibrate::{calibrate, Calibration, Request, SharedWarmStart};
-use crate::solver::problem::{rmse, Hold, PreparedRefit, Problem, SolverSettings};
+use crate::solver::problem::SolverSettings;
 use crate::solver::select::calibrate_auto_sharing;
 use super::record::{CameraRow, Header, ReferenceInfo, Row, Task};
 use super::refit::{test_rmse, TestError};
 use super::shard::Shard;
-use rand::{RngCore, SeedableRng};
-use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::OnceLock;
 

@@ -1,29 +1,8 @@
 //! Sharding: a slice of the task grid (`--shard`, Slurm, Kubernetes), the
 //! file a shard writes, and the merge of shard files back into one run.
-use crate::app::board_json::BoardJson;
-use crate::app::config::{Config, ProtocolConfig};
-use crate::app::sfm::{Experiment, SfmConfig};
 use crate::error::{Error, Result};
-use crate::model::board::{HigherBend, Method, Paraboloid};
-use crate::model::camera::CameraSpec;
-use crate::model::dataset::Dataset;
-use crate::model::lens::Intrinsics;
-use crate::model::metrics::{grid_rays, mapping_error_of, mapping_error_rot_of};
-use crate::model::selection::{AutoSettings, Selection};
-use crate::model::state::State;
-use crate::model::synthetic::Truth;
-use crate::model::target::Target;
-use crate::model::uncertainty::CameraUncertainty;
-use crate::solver::calibrate::{calibrate, Calibration, Request, SharedWarmStart};
-use crate::solver::problem::{rmse, Hold, PreparedRefit, Problem, SolverSettings};
-use crate::solver::select::calibrate_auto_sharing;
 use super::record::{Header, Row};
-use rand::{RngCore, SeedableRng};
-use rand_chacha::ChaCha8Rng;
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::OnceLock;
 
 /// `--shard i/N`: the i-th of N disjoint slices of the task grid.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

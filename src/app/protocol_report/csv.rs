@@ -1,17 +1,8 @@
 //! `protocol.csv` (one line per task) and `deformations.csv` (one line per bent image).
-use crate::app::fsio::write_atomic;
-use crate::app::html_report::page::{Figure, Table};
-use crate::app::html_report::protocol::{protocol_page, DatasetReport};
-use crate::app::html_report::REPORT_FILE;
-use crate::app::plots::{self, Axes, HLine, Series, PALETTE};
-use crate::app::protocol::{CameraRow, Header, Row};
+use crate::app::protocol::{Header, Row};
 use crate::error::{Error, Result};
-use crate::model::board::{Method, HIGHER_BEND_PARAMS};
 use crate::model::metrics::Stat;
-use serde::{Deserialize, Serialize};
-use std::collections::BTreeMap;
 use std::fmt::Write;
-use std::path::Path;
 #[allow(unused_imports)]
 use super::summary::*;
 

@@ -1,18 +1,10 @@
 //! `summary.json`: each method's statistics over the subsets, and the grouping
 //! of rows into the report's columns that the tables and figures share.
-use crate::app::fsio::write_atomic;
-use crate::app::html_report::page::{Figure, Table};
-use crate::app::html_report::protocol::{protocol_page, DatasetReport};
-use crate::app::html_report::REPORT_FILE;
-use crate::app::plots::{self, Axes, HLine, Series, PALETTE};
 use crate::app::protocol::{CameraRow, Header, Row};
-use crate::error::{Error, Result};
-use crate::model::board::{Method, HIGHER_BEND_PARAMS};
+use crate::model::board::Method;
 use crate::model::metrics::Stat;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
-use std::fmt::Write;
-use std::path::Path;
 
 /// Per-method block of `summary.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -1,23 +1,13 @@
 //! A fit's second part, from the warm start on: the method's solve, the noise
 //! that weights the priors, outlier rejection and the result.
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::model::board::Method;
 use crate::model::dataset::Dataset;
-use crate::model::lens::Intrinsics;
-use crate::model::metrics::mapping_error;
-use crate::model::pose::Pose;
-use crate::model::selection::Selection;
-use crate::model::uncertainty::{IntrinsicsCovariance, UncertaintyError};
-use crate::model::{fisheye_init, zhang};
-use crate::solver::auto_prior::{AutoPrior, Estimate};
+use crate::model::uncertainty::UncertaintyError;
 use crate::solver::problem::{
-    choose_gauge, rmse, underobserved_corners, Hold, Problem, SolveReport, SolverSettings, State,
-    WarmUp,
+    rmse, Hold, Problem, SolveReport, State,
 };
-use crate::solver::{auto_prior, repose, robust};
-use nalgebra::{Matrix3, Vector2};
-use std::collections::HashMap;
-use std::sync::OnceLock;
+use crate::solver::robust;
 use std::time::Instant;
 use super::method::{solve_method, with_auto_priors, Solved};
 use super::types::{Assessment, Calibration, Request, Stage, Suspect};

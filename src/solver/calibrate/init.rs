@@ -2,24 +2,13 @@
 //! the fisheye focal search) per camera, the rig and one board pose per frame,
 //! with a warning or an error for every view or camera the data cannot start.
 use crate::error::{Error, Result};
-use crate::model::board::Method;
 use crate::model::dataset::Dataset;
 use crate::model::lens::Intrinsics;
-use crate::model::metrics::mapping_error;
 use crate::model::pose::Pose;
-use crate::model::selection::Selection;
-use crate::model::uncertainty::{IntrinsicsCovariance, UncertaintyError};
 use crate::model::{fisheye_init, zhang};
-use crate::solver::auto_prior::{AutoPrior, Estimate};
-use crate::solver::problem::{
-    choose_gauge, rmse, underobserved_corners, Hold, Problem, SolveReport, SolverSettings, State,
-    WarmUp,
-};
-use crate::solver::{auto_prior, repose, robust};
+use crate::solver::problem::State;
 use nalgebra::{Matrix3, Vector2};
 use std::collections::HashMap;
-use std::sync::OnceLock;
-use std::time::Instant;
 
 /// Fewest corners an image needs to enter the calibration (a homography needs four).
 pub const MIN_CORNERS_PER_IMAGE: usize = 4;

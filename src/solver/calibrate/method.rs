@@ -1,24 +1,14 @@
 //! The requested method's own solve after the warm start: its gauge and frozen
 //! corners, the smoothness prior's order test, and the priors with σ = "auto".
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::model::board::Method;
 use crate::model::dataset::Dataset;
-use crate::model::lens::Intrinsics;
-use crate::model::metrics::mapping_error;
-use crate::model::pose::Pose;
-use crate::model::selection::Selection;
-use crate::model::uncertainty::{IntrinsicsCovariance, UncertaintyError};
-use crate::model::{fisheye_init, zhang};
 use crate::solver::auto_prior::{AutoPrior, Estimate};
 use crate::solver::problem::{
-    choose_gauge, rmse, underobserved_corners, Hold, Problem, SolveReport, SolverSettings, State,
+    choose_gauge, underobserved_corners, Hold, Problem, SolverSettings, State,
     WarmUp,
 };
-use crate::solver::{auto_prior, repose, robust};
-use nalgebra::{Matrix3, Vector2};
-use std::collections::HashMap;
-use std::sync::OnceLock;
-use std::time::Instant;
+use crate::solver::{auto_prior, robust};
 use super::types::{Request, Stage};
 use super::warm::warm_start_settings;
 

@@ -11,25 +11,10 @@ mod method;
 mod types;
 mod warm;
 
-use crate::error::{Error, Result};
-use crate::model::board::Method;
+use crate::error::Result;
 use crate::model::dataset::Dataset;
-use crate::model::lens::Intrinsics;
-use crate::model::metrics::mapping_error;
-use crate::model::pose::Pose;
-use crate::model::selection::Selection;
-use crate::model::uncertainty::{IntrinsicsCovariance, UncertaintyError};
-use crate::model::{fisheye_init, zhang};
-use crate::solver::auto_prior::{AutoPrior, Estimate};
-use crate::solver::problem::{
-    choose_gauge, rmse, underobserved_corners, Hold, Problem, SolveReport, SolverSettings, State,
-    WarmUp,
-};
-use crate::solver::{auto_prior, repose, robust};
-use nalgebra::{Matrix3, Vector2};
-use std::collections::HashMap;
+use crate::solver::problem::SolverSettings;
 use std::sync::OnceLock;
-use std::time::Instant;
 use fit::fit_from;
 use warm::{warm_start, warm_start_is_loose, warm_start_settings, WarmStart};
 pub use init::{MIN_CORNERS_PER_IMAGE, MIN_IMAGES};

@@ -2,7 +2,10 @@
 use super::init::initialise;
 use super::warm::from_second_start;
 use super::*;
+use crate::model::board::Method;
 use crate::model::lens::LensModel;
+use crate::model::metrics::mapping_error;
+use crate::solver::problem::Problem;
 use crate::model::synthetic::{Generator, Preset};
 
 /// The second start's looser solve may stop early only where converging it

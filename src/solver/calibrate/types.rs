@@ -1,26 +1,15 @@
 //! What a calibration is asked for and what it gives back: the request, the
 //! solver stages, the result and its suspect observations. No computation beyond
 //! reading the result.
-use crate::error::{Error, Result};
 use crate::model::board::Method;
 use crate::model::dataset::Dataset;
 use crate::model::lens::Intrinsics;
-use crate::model::metrics::mapping_error;
-use crate::model::pose::Pose;
 use crate::model::selection::Selection;
 use crate::model::trust::Trust;
 use crate::model::uncertainty::{CameraUncertainty, IntrinsicsCovariance, UncertaintyError};
-use crate::model::{fisheye_init, zhang};
-use crate::solver::auto_prior::{AutoPrior, Estimate};
 use crate::solver::problem::{
-    choose_gauge, rmse, underobserved_corners, Hold, Problem, SolveReport, SolverSettings, State,
-    WarmUp,
+    Hold, Problem, SolveReport, SolverSettings, State,
 };
-use crate::solver::{auto_prior, repose, robust};
-use nalgebra::{Matrix3, Vector2};
-use std::collections::HashMap;
-use std::sync::OnceLock;
-use std::time::Instant;
 
 /// What the user asks of one calibration.
 #[derive(Debug, Clone, PartialEq)]

@@ -1,24 +1,15 @@
 //! The warm start every method shares: the data checked, the initialisation
 //! and the first `standard` solve, with stray frames re-posed and the lens
 //! registry's second start tried.
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::model::board::Method;
 use crate::model::dataset::Dataset;
 use crate::model::lens::Intrinsics;
 use crate::model::metrics::mapping_error;
-use crate::model::pose::Pose;
-use crate::model::selection::Selection;
-use crate::model::uncertainty::{IntrinsicsCovariance, UncertaintyError};
-use crate::model::{fisheye_init, zhang};
-use crate::solver::auto_prior::{AutoPrior, Estimate};
 use crate::solver::problem::{
-    choose_gauge, rmse, underobserved_corners, Hold, Problem, SolveReport, SolverSettings, State,
-    WarmUp,
+    Problem, SolveReport, SolverSettings, State,
 };
-use crate::solver::{auto_prior, repose, robust};
-use nalgebra::{Matrix3, Vector2};
-use std::collections::HashMap;
-use std::sync::OnceLock;
+use crate::solver::{repose, robust};
 use std::time::Instant;
 use super::init::{coverage_warnings, initialise};
 use super::types::{Request, Stage};
