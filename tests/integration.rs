@@ -32,6 +32,7 @@ mod photo_noise;
 mod photos;
 mod printable;
 mod protocol;
+mod protocol_shards;
 mod python;
 mod real_stereo;
 mod rejection;

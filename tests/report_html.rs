@@ -437,3 +437,28 @@ fn corners_vnl_names_label_their_frames() {
         assert_eq!(corners(&read, dense), corners(&d, original), "{name}");
     }
 }
+
+#[test]
+fn the_bend_figure_draws_the_whole_surface() {
+    use deformcal::app::plots::deformation_svg;
+    use deformcal::model::board::{Paraboloid, HIGHER_BEND_PARAMS};
+    use std::collections::BTreeSet;
+    let t = deformcal::model::target::Target {
+        rows: 13,
+        cols: 13,
+        spacing: 0.07,
+    };
+    let fills = |higher: &[f64; HIGHER_BEND_PARAMS]| -> BTreeSet<String> {
+        let svg = deformation_svg("bend", &t, &Paraboloid::default(), higher).unwrap();
+        svg.match_indices("fill=\"#")
+            .map(|(i, _)| svg[i + 7..i + 13].to_string())
+            .collect()
+    };
+    // A pure cubic x³ and a twist x³y, no paraboloid: the map must not be flat.
+    let mut h = [0.0; HIGHER_BEND_PARAMS];
+    h[0] = 0.01;
+    h[5] = 0.02;
+    let flat = fills(&[0.0; HIGHER_BEND_PARAMS]).len();
+    let bent = fills(&h).len();
+    assert!(bent > flat + 20, "{flat} colours flat, {bent} bent");
+}

@@ -64,6 +64,8 @@ fn calibration_json_and_summary_carry_the_trust_figures() {
     let (bent, _) = data(Preset::T1, 20, 3, 1.0, 0.0);
     let mut c = run(&bent, Method::Standard, Loss::Cauchy);
     c.detector_noise_px = Some(0.15);
+    // The figures the files report, at that noise.
+    c.assess();
     let json = deformcal::app::calibration_json::CalibrationJson::from(&c);
     let t = c.trust(Some(0.15)).unwrap();
     assert_eq!(json.noise_px, Some(0.15));

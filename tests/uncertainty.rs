@@ -235,6 +235,8 @@ fn json_and_summary_carry_the_uncertainty() {
         deformcal::solver::problem::Loss::Cauchy,
     );
     c.detector_noise_px = Some(NOISE_PX);
+    // The figures the files report, at that noise.
+    c.assess();
     let u = c.uncertainty().unwrap().remove(0);
     // A held parameter has no σ and no share in the covariance.
     assert!(u.intrinsics_std.iter().all(|(n, _)| *n != "k3"));
@@ -276,6 +278,7 @@ fn json_and_summary_carry_the_uncertainty() {
     c.covariance = Err(
         deformcal::model::uncertainty::UncertaintyError::RankDeficient("k1 of camera cam0".into()),
     );
+    c.assess();
     let json = CalibrationJson::from(&c);
     assert!(json.cameras[0].uncertainty.is_none());
     let note = json.uncertainty_note.clone().unwrap();

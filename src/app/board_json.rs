@@ -61,7 +61,7 @@ pub fn of(c: &Calibration) -> Option<BoardJson> {
             [g[0] + d[0], g[1] + d[1], g[2] + d[2]]
         })
         .collect();
-    let noise = c.trust(c.detector_noise_px).map(|t| t.noise_px);
+    let noise = c.assessment.trust.map(|t| t.noise_px);
     let correction_std = noise.and_then(|noise| {
         let unit =
             crate::solver::covariance::unit_correction_std(&c.problem(), &c.state, &c.settings)

@@ -329,8 +329,8 @@ impl From<&Calibration> for CalibrationJson {
             cam_n[v.camera] += v.observations;
         }
         let bends = c.method.has_paraboloid();
-        let trust = c.trust(c.detector_noise_px);
-        let uncertainty = c.uncertainty();
+        let trust = c.assessment.trust;
+        let uncertainty = &c.assessment.uncertainty;
         let camera_rmse: Vec<Option<f64>> = cam_sq
             .iter()
             .zip(&cam_n)

@@ -2,7 +2,7 @@
 //! it into a dataset, with camera patterns for several cameras, and writing one.
 use crate::error::{Error, Result};
 use crate::model::camera::CameraSpec;
-use crate::model::dataset::Dataset;
+use crate::model::dataset::{Dataset, DetectedCorner};
 use crate::model::target::Target;
 use std::collections::{BTreeMap, BTreeSet};
 use std::fmt::Write;
@@ -385,14 +385,18 @@ fn assemble(
         .map(|(i, k)| (k, i as i64))
         .collect();
     let mut rows = Vec::new();
-    let mut weights = Vec::new();
     let mut files = Vec::new();
     for (camera, key, corners, file) in keyed {
         files.push((*camera, frame_of[key], file.clone()));
         for (i, c) in corners.iter().enumerate() {
             if let Some(uv) = c.xy {
-                rows.push((*camera, frame_of[key], i, uv));
-                weights.push(c.weight);
+                rows.push(DetectedCorner {
+                    camera: *camera,
+                    frame_id: frame_of[key],
+                    corner: i,
+                    uv,
+                    weight: c.weight,
+                });
             }
         }
     }
@@ -415,11 +419,7 @@ fn assemble(
         }
         return Err(data_err(path, 1, "no corner was found in any image".into()));
     }
-    let mut dataset = Dataset::from_keyed(target, cameras, rows);
-    for (o, w) in dataset.observations.iter_mut().zip(weights) {
-        o.weight = w;
-    }
-    Ok((dataset, files))
+    Ok((Dataset::from_detected(target, cameras, rows), files))
 }
 
 /// A parsed corners table: the dataset, how many images had no board, and each

@@ -78,7 +78,7 @@ pub fn reasons(c: &Calibration, rules: Rules) -> Vec<String> {
             ),
         });
     } else if rules.max_rmse_px.is_none() && rmse > NOISE_RULE_FLOOR_PX {
-        if let Some(t) = c.trust(c.detector_noise_px) {
+        if let Some(t) = c.assessment.trust {
             let floor = std::f64::consts::SQRT_2 * t.noise_px;
             if rmse > NOISE_FACTOR * floor {
                 out.push(format!(

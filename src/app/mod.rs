@@ -4,6 +4,7 @@ pub mod advise;
 pub mod board_json;
 pub mod calibration_json;
 pub mod capi;
+pub mod capi_types;
 pub mod commands;
 pub mod compare;
 pub mod config;

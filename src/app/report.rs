@@ -64,7 +64,7 @@ fn rejection_line(c: &Calibration) -> String {
 
 /// The noise, the bias ratio and what it suggests (docs/conventions.md §3a).
 fn write_trust(s: &mut String, c: &Calibration) {
-    let Some(t) = c.trust(c.detector_noise_px) else {
+    let Some(t) = c.assessment.trust else {
         return;
     };
     let weighted = c.dataset.observations.iter().any(|o| o.weight != 1.0);
@@ -175,7 +175,7 @@ pub fn verdict(sel: &Selection, c: &Calibration) -> String {
     }
     // As `compare` does: the larger of the plain and the rotation-compensated
     // shift relative to the expected mapping error of the same kind.
-    let expected = c.uncertainty().ok().map(|u| {
+    let expected = c.assessment.uncertainty.as_ref().ok().map(|u| {
         u.iter().fold((0.0f64, 0.0f64), |m, x| {
             (
                 m.0.max(x.expected_mapping_error_px),
@@ -203,7 +203,7 @@ pub fn verdict(sel: &Selection, c: &Calibration) -> String {
 /// uncertainty, then the expected mapping error (docs/conventions.md §3a).
 fn write_cameras(s: &mut String, c: &Calibration) {
     let d = &c.dataset;
-    let uncertainty = c.uncertainty();
+    let uncertainty = &c.assessment.uncertainty;
     for (k, cam) in d.cameras.iter().enumerate() {
         let i = c.state.intrinsics[k];
         let u = uncertainty.as_ref().ok().and_then(|u| u.get(k));

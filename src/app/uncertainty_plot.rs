@@ -32,12 +32,11 @@ pub fn write_maps(dir: &Path, c: &Calibration) -> Result<()> {
 /// camera when the calibration has no uncertainty), without writing it: the
 /// report embeds the same text.
 pub fn render_maps(dir: &Path, c: &Calibration) -> Result<Vec<Option<(PathBuf, String)>>> {
-    let Ok(covariance) = c.intrinsics_covariance() else {
+    let trust = c.assessment.trust.as_ref();
+    let Ok(covariance) = c.intrinsics_covariance_at(trust) else {
         return Ok(vec![None; c.dataset.cameras.len()]);
     };
-    let noise = c
-        .trust(c.detector_noise_px)
-        .map_or(f64::NAN, |t| t.noise_px);
+    let noise = trust.map_or(f64::NAN, |t| t.noise_px);
     let cameras = c.dataset.cameras.iter().zip(&c.state.intrinsics);
     let mut out: Vec<Option<(PathBuf, String)>> = cameras
         .zip(&covariance)

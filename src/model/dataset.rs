@@ -14,6 +14,19 @@ pub struct Observation {
     pub weight: f64,
 }
 
+/// One corner as a detector or a file hands it over, before frames are numbered
+/// densely: the camera, the user's frame number, the corner's id on the board,
+/// its pixel, and the weight of its residual (σ_ref/σ from the refinement, or
+/// 0.5^level for mrgingham's decimated images; 1 when the source says nothing).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DetectedCorner {
+    pub camera: usize,
+    pub frame_id: i64,
+    pub corner: usize,
+    pub uv: [f64; 2],
+    pub weight: f64,
+}
+
 /// Everything a calibration sees: board, cameras, frames and observations.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Dataset {
@@ -77,28 +90,48 @@ impl Dataset {
         }
     }
 
-    /// Builds a dataset from observations keyed by user frame numbers.
+    /// Builds a dataset from observations keyed by user frame numbers, every
+    /// weight 1 (a source that gives no weights).
     pub fn from_keyed(
         target: Target,
         cameras: Vec<CameraSpec>,
         rows: impl IntoIterator<Item = (usize, i64, usize, [f64; 2])>,
     ) -> Dataset {
-        let rows: Vec<_> = rows.into_iter().collect();
-        let ids: Vec<i64> = rows
+        let corners = rows
+            .into_iter()
+            .map(|(camera, frame_id, corner, uv)| DetectedCorner {
+                camera,
+                frame_id,
+                corner,
+                uv,
+                weight: 1.0,
+            });
+        Dataset::from_detected(target, cameras, corners)
+    }
+
+    /// Builds a dataset from detected corners, each keeping its weight; frames
+    /// are numbered densely in the order of their user numbers.
+    pub fn from_detected(
+        target: Target,
+        cameras: Vec<CameraSpec>,
+        corners: impl IntoIterator<Item = DetectedCorner>,
+    ) -> Dataset {
+        let corners: Vec<DetectedCorner> = corners.into_iter().collect();
+        let ids: Vec<i64> = corners
             .iter()
-            .map(|r| r.1)
+            .map(|c| c.frame_id)
             .collect::<std::collections::BTreeSet<_>>()
             .into_iter()
             .collect();
         let index: HashMap<i64, usize> = ids.iter().enumerate().map(|(i, &f)| (f, i)).collect();
-        let observations = rows
+        let observations = corners
             .into_iter()
-            .map(|(camera, f, corner, uv)| Observation {
-                camera,
-                frame: index[&f],
-                corner,
-                uv,
-                weight: 1.0,
+            .map(|c| Observation {
+                camera: c.camera,
+                frame: index[&c.frame_id],
+                corner: c.corner,
+                uv: c.uv,
+                weight: c.weight,
             })
             .collect();
         Dataset {

@@ -109,22 +109,7 @@ pub fn stereo_errors(
         ));
     }
     let n = distances.len() as f64;
-    let mut sq_mm = 0.0;
-    let mut corners = 0usize;
-    let mut frames = 0;
-    for points in boards.values() {
-        if points.len() < MIN_TRIANGULATED_CORNERS {
-            continue;
-        }
-        let nominal: Vec<Vector3<f64>> = points
-            .iter()
-            .map(|(i, _)| held_out.target.nominal(*i))
-            .collect();
-        let triangulated: Vec<Vector3<f64>> = points.iter().map(|(_, x)| *x).collect();
-        sq_mm += rigid_residual_sq(&nominal, &triangulated) * 1e6;
-        corners += points.len();
-        frames += 1;
-    }
+    let (sq_mm, corners, frames) = triangulation_misfit(&boards, &held_out.target);
     Ok(StereoErrors {
         epipolar_mean_px: distances.iter().sum::<f64>() / n,
         epipolar_rms_px: (distances.iter().map(|d| d * d).sum::<f64>() / n).sqrt(),
@@ -137,6 +122,29 @@ pub fn stereo_errors(
         frames,
         skipped,
     })
+}
+
+/// The triangulated boards' squared misfit after each frame's best rigid
+/// alignment (mm², summed over corners), the corners and the frames that count:
+/// a frame with fewer than [`MIN_TRIANGULATED_CORNERS`] is left out.
+fn triangulation_misfit(
+    boards: &BTreeMap<usize, Vec<(usize, Vector3<f64>)>>,
+    target: &crate::model::target::Target,
+) -> (f64, usize, usize) {
+    let mut sq_mm = 0.0;
+    let mut corners = 0usize;
+    let mut frames = 0;
+    for points in boards.values() {
+        if points.len() < MIN_TRIANGULATED_CORNERS {
+            continue;
+        }
+        let nominal: Vec<Vector3<f64>> = points.iter().map(|(i, _)| target.nominal(*i)).collect();
+        let triangulated: Vec<Vector3<f64>> = points.iter().map(|(_, x)| *x).collect();
+        sq_mm += rigid_residual_sq(&nominal, &triangulated) * 1e6;
+        corners += points.len();
+        frames += 1;
+    }
+    (sq_mm, corners, frames)
 }
 
 /// Distance, pixels at focal length `f`, of ray `r`'s pinhole image from the line

@@ -3,7 +3,7 @@
 //! planar board), refusing solves that made no progress or whose cost is not
 //! finite, rejecting outliers after the robust solve (mrcal's scheme), and warning
 //! when the views cannot determine the focal length. The pipeline in
-//! `calibrate.rs` calls these; they hold no state of their own.
+//! `calibrate` calls these; they hold no state of their own.
 use crate::error::{Error, Result};
 use crate::model::board::Method;
 use crate::model::dataset::{Dataset, Observation};
@@ -344,75 +344,101 @@ fn local_deviations(dataset: &Dataset, residuals: &[f64]) -> Vec<f64> {
             (j != usize::MAX).then(|| [residuals[2 * j], residuals[2 * j + 1]])
         };
         for &i in view {
-            let corner = obs[i].corner;
-            // Each prediction: its value and its weights on the corners within
-            // reach (slot 2·direction + step − 1), for the deviation's noise.
-            let single = |d: usize| {
-                residual(corner, DIRECTIONS[d], 1).map(|a| {
-                    let mut w = [0.0; 8];
-                    w[2 * d] = 1.0;
-                    (a, w)
-                })
-            };
-            // On the stack: this runs for every corner in every rejection round.
-            let mut adjacent = [([0.0; 2], [0.0; 8]); 4];
-            let mut adjacent_count = 0;
-            for p in (0..4).filter_map(single) {
-                adjacent[adjacent_count] = p;
-                adjacent_count += 1;
-            }
-            let mut linear = [([0.0; 2], [0.0; 8]); 6];
-            let mut linear_count = 0;
-            if adjacent_count < 4 {
-                for (a, b) in [(0, 1), (2, 3)] {
-                    if let (Some(x), Some(y)) = (
-                        residual(corner, DIRECTIONS[a], 1),
-                        residual(corner, DIRECTIONS[b], 1),
-                    ) {
-                        let mut w = [0.0; 8];
-                        (w[2 * a], w[2 * b]) = (0.5, 0.5);
-                        linear[linear_count] = ([0.5 * (x[0] + y[0]), 0.5 * (x[1] + y[1])], w);
-                        linear_count += 1;
-                    }
-                }
-                for (d, &step) in DIRECTIONS.iter().enumerate() {
-                    if let (Some(x), Some(y)) =
-                        (residual(corner, step, 1), residual(corner, step, REACH))
-                    {
-                        let mut w = [0.0; 8];
-                        (w[2 * d], w[2 * d + 1]) = (2.0, -1.0);
-                        linear[linear_count] = ([2.0 * x[0] - y[0], 2.0 * x[1] - y[1]], w);
-                        linear_count += 1;
-                    }
-                }
-            }
-            let predictions = if linear_count > 0 {
-                &linear[..linear_count]
-            } else {
-                &adjacent[..adjacent_count]
-            };
             let r = [residuals[2 * i], residuals[2 * i + 1]];
-            let (prediction, noise) = if predictions.is_empty() {
-                ([0.0, 0.0], 1.0)
-            } else {
-                // The deviation's noise in units of one residual's, taking the
-                // median as the mean: √(1 + Σ w²) of the mean prediction.
-                let m = predictions.len() as f64;
-                let spread: f64 = (0..8)
-                    .map(|k| (predictions.iter().map(|p| p.1[k]).sum::<f64>() / m).powi(2))
-                    .sum();
-                (median2(predictions), (1.0 + spread).sqrt())
-            };
-            let deviation = (r[0] - prediction[0])
-                .abs()
-                .max((r[1] - prediction[1]).abs());
-            out[i] = deviation / noise;
+            out[i] = corner_deviation(obs[i].corner, r, &residual);
         }
         for &i in view {
             at[obs[i].corner] = usize::MAX;
         }
     }
     out
+}
+
+/// A prediction of a corner's residual from its neighbours': its value, and its
+/// weights on the corners within reach (slot 2·direction + step − 1), for the
+/// deviation's noise.
+type Prediction = ([f64; 2], [f64; 8]);
+
+/// How far residual `r` of `corner` stands out from its neighbours', in units of
+/// the comparison's noise (see [`local_deviations`]); `residual(corner,
+/// direction, step)` is a neighbour's residual where it was seen.
+fn corner_deviation(
+    corner: usize,
+    r: [f64; 2],
+    residual: &impl Fn(usize, (isize, isize), isize) -> Option<[f64; 2]>,
+) -> f64 {
+    let single = |d: usize| {
+        residual(corner, DIRECTIONS[d], 1).map(|a| {
+            let mut w = [0.0; 8];
+            w[2 * d] = 1.0;
+            (a, w)
+        })
+    };
+    // On the stack: this runs for every corner in every rejection round.
+    let mut adjacent: [Prediction; 4] = [([0.0; 2], [0.0; 8]); 4];
+    let mut adjacent_count = 0;
+    for p in (0..4).filter_map(single) {
+        adjacent[adjacent_count] = p;
+        adjacent_count += 1;
+    }
+    let mut linear: [Prediction; 6] = [([0.0; 2], [0.0; 8]); 6];
+    let linear_count = if adjacent_count < 4 {
+        linear_predictions(corner, residual, &mut linear)
+    } else {
+        0
+    };
+    let predictions = if linear_count > 0 {
+        &linear[..linear_count]
+    } else {
+        &adjacent[..adjacent_count]
+    };
+    let (prediction, noise) = if predictions.is_empty() {
+        ([0.0, 0.0], 1.0)
+    } else {
+        // The deviation's noise in units of one residual's, taking the
+        // median as the mean: √(1 + Σ w²) of the mean prediction.
+        let m = predictions.len() as f64;
+        let spread: f64 = (0..8)
+            .map(|k| (predictions.iter().map(|p| p.1[k]).sum::<f64>() / m).powi(2))
+            .sum();
+        (median2(predictions), (1.0 + spread).sqrt())
+    };
+    let deviation = (r[0] - prediction[0])
+        .abs()
+        .max((r[1] - prediction[1]).abs());
+    deviation / noise
+}
+
+/// The linear predictions of `corner`'s residual where its neighbours allow them,
+/// written into `out`; returns how many: centred ((a + b)/2 of the two
+/// neighbours along a row or column), then one-sided (2a − b of the next two in
+/// one direction).
+fn linear_predictions(
+    corner: usize,
+    residual: &impl Fn(usize, (isize, isize), isize) -> Option<[f64; 2]>,
+    out: &mut [Prediction; 6],
+) -> usize {
+    let mut count = 0;
+    for (a, b) in [(0, 1), (2, 3)] {
+        if let (Some(x), Some(y)) = (
+            residual(corner, DIRECTIONS[a], 1),
+            residual(corner, DIRECTIONS[b], 1),
+        ) {
+            let mut w = [0.0; 8];
+            (w[2 * a], w[2 * b]) = (0.5, 0.5);
+            out[count] = ([0.5 * (x[0] + y[0]), 0.5 * (x[1] + y[1])], w);
+            count += 1;
+        }
+    }
+    for (d, &step) in DIRECTIONS.iter().enumerate() {
+        if let (Some(x), Some(y)) = (residual(corner, step, 1), residual(corner, step, REACH)) {
+            let mut w = [0.0; 8];
+            (w[2 * d], w[2 * d + 1]) = (2.0, -1.0);
+            out[count] = ([2.0 * x[0] - y[0], 2.0 * x[1] - y[1]], w);
+            count += 1;
+        }
+    }
+    count
 }
 
 /// Left, right, up, down on the board, as (row, column) steps.
@@ -610,182 +636,5 @@ pub fn weak_intrinsics_warnings(dataset: &Dataset, state: &State, warnings: &mut
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::model::camera::CameraSpec;
-    use crate::model::target::Target;
-    use rand::seq::SliceRandom;
-    use rand::{Rng, SeedableRng};
-    use std::collections::HashMap;
-
-    /// The deviations computed again with a map and the predictions written out
-    /// one by one, as the reference of the dense computation.
-    fn local_deviations_by_map(dataset: &Dataset, residuals: &[f64]) -> Vec<f64> {
-        let (rows, cols) = (dataset.target.rows as isize, dataset.target.cols as isize);
-        let index: HashMap<(usize, usize, usize), usize> = dataset
-            .observations
-            .iter()
-            .enumerate()
-            .map(|(i, o)| ((o.camera, o.frame, o.corner), i))
-            .collect();
-        let deviation = |i: usize, o: &Observation| {
-            let (row, col) = ((o.corner as isize) / cols, (o.corner as isize) % cols);
-            // The residual at an offset, with its weights keyed by offset.
-            let at = |dr: isize, dc: isize| -> Option<Vector2<f64>> {
-                let (r, c) = (row + dr, col + dc);
-                if r < 0 || c < 0 || r >= rows || c >= cols {
-                    return None;
-                }
-                index
-                    .get(&(o.camera, o.frame, (r * cols + c) as usize))
-                    .map(|&j| Vector2::new(residuals[2 * j], residuals[2 * j + 1]))
-            };
-            type Weights = Vec<((isize, isize), f64)>;
-            let steps = [(0, -1), (0, 1), (-1, 0), (1, 0)];
-            let adjacent: Vec<(Vector2<f64>, Weights)> = steps
-                .iter()
-                .filter_map(|&(dr, dc)| at(dr, dc).map(|a| (a, vec![((dr, dc), 1.0)])))
-                .collect();
-            let mut predictions = Vec::new();
-            if adjacent.len() == 4 {
-                predictions = adjacent;
-            } else {
-                for (dr, dc) in [(0, 1), (1, 0)] {
-                    if let (Some(a), Some(b)) = (at(-dr, -dc), at(dr, dc)) {
-                        predictions.push(((a + b) / 2.0, vec![((-dr, -dc), 0.5), ((dr, dc), 0.5)]));
-                    }
-                }
-                for (dr, dc) in steps {
-                    if let (Some(a), Some(b)) = (at(dr, dc), at(2 * dr, 2 * dc)) {
-                        predictions
-                            .push((2.0 * a - b, vec![((dr, dc), 2.0), ((2 * dr, 2 * dc), -1.0)]));
-                    }
-                }
-                if predictions.is_empty() {
-                    predictions = adjacent;
-                }
-            }
-            let r = Vector2::new(residuals[2 * i], residuals[2 * i + 1]);
-            if predictions.is_empty() {
-                return r[0].abs().max(r[1].abs());
-            }
-            let mut mean: HashMap<(isize, isize), f64> = HashMap::new();
-            for (_, w) in &predictions {
-                for &(k, x) in w {
-                    *mean.entry(k).or_default() += x / predictions.len() as f64;
-                }
-            }
-            let noise = (1.0 + mean.values().map(|x| x * x).sum::<f64>()).sqrt();
-            let mut us: Vec<f64> = predictions.iter().map(|p| p.0[0]).collect();
-            let mut vs: Vec<f64> = predictions.iter().map(|p| p.0[1]).collect();
-            (r[0] - median(&mut us))
-                .abs()
-                .max((r[1] - median(&mut vs)).abs())
-                / noise
-        };
-        dataset
-            .observations
-            .iter()
-            .enumerate()
-            .map(|(i, o)| deviation(i, o))
-            .collect()
-    }
-
-    /// A steep residual field, linear over the board (a model error), with noise,
-    /// gaps and a partial view: rejection takes the gross outliers planted on a
-    /// board corner, an edge and next to a gap, and nothing else, in one round
-    /// and after it. A median of neighbours on the edges took corners there by
-    /// the field's slope, round after round.
-    #[test]
-    fn a_linear_model_error_is_not_rejected_and_outliers_on_the_edges_are() {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
-        let target = Target {
-            rows: 7,
-            cols: 9,
-            spacing: 0.05,
-        };
-        let cameras = vec![CameraSpec::new("a", 640, 480, Default::default())];
-        let mut rows = Vec::new();
-        for frame in 0..12 {
-            for corner in 0..63 {
-                // Frame 1 sees the board's left part only; frame 2 misses a corner.
-                if (frame == 1 && corner % 9 > 5) || (frame == 2 && corner == 31) {
-                    continue;
-                }
-                rows.push((0, frame, corner, [0.0, 0.0]));
-            }
-        }
-        let d = Dataset::from_keyed(target, cameras, rows);
-        let slope: Vec<[f64; 6]> = (0..12)
-            .map(|_| std::array::from_fn(|_| rng.gen_range(-1.5..1.5)))
-            .collect();
-        let noise = rand_distr::Normal::new(0.0, 0.1).unwrap();
-        let mut residuals = Vec::new();
-        for o in &d.observations {
-            let (row, col) = ((o.corner / 9) as f64, (o.corner % 9) as f64);
-            let s = &slope[o.frame];
-            residuals.push(s[0] + s[1] * row + s[2] * col + rng.sample(noise));
-            residuals.push(s[3] + s[4] * row + s[5] * col + rng.sample(noise));
-        }
-        let planted = [(0, 0), (3, 4), (1, 5), (2, 30), (2, 62)];
-        let mut expected = Vec::new();
-        for (i, o) in d.observations.iter().enumerate() {
-            if planted.contains(&(o.frame, o.corner)) {
-                residuals[2 * i] += 2.5;
-                residuals[2 * i + 1] -= 1.5;
-                expected.push(i);
-            }
-        }
-        assert_eq!(expected.len(), planted.len());
-        assert_eq!(pick_outliers(&d, &residuals, 4.0), expected);
-        let mut kept = d.clone();
-        let mut r = Vec::new();
-        kept.observations.clear();
-        for (i, o) in d.observations.iter().enumerate() {
-            if !expected.contains(&i) {
-                kept.observations.push(*o);
-                r.extend_from_slice(&residuals[2 * i..2 * i + 2]);
-            }
-        }
-        assert_eq!(pick_outliers(&kept, &r, 4.0), Vec::<usize>::new());
-    }
-
-    #[test]
-    fn local_deviations_equal_the_map_based_ones() {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
-        let target = Target {
-            rows: 6,
-            cols: 7,
-            spacing: 0.05,
-        };
-        let cameras = vec![
-            CameraSpec::new("a", 640, 480, Default::default()),
-            CameraSpec::new("b", 640, 480, Default::default()),
-        ];
-        // Corners missing, rows in no order, corners observed twice in a view.
-        let mut rows = Vec::new();
-        for camera in 0..2 {
-            for frame in 0..6 {
-                for corner in 0..42 {
-                    if rng.gen_bool(0.8) {
-                        rows.push((camera, frame, corner, [0.0, 0.0]));
-                    }
-                }
-            }
-        }
-        for _ in 0..12 {
-            let dup = rows[rng.gen_range(0..rows.len())];
-            rows.push(dup);
-        }
-        rows.shuffle(&mut rng);
-        let d = Dataset::from_keyed(target, cameras, rows);
-        let residuals: Vec<f64> = (0..2 * d.observations.len())
-            .map(|_| rng.gen_range(-2.0..2.0))
-            .collect();
-        let dense = local_deviations(&d, &residuals);
-        assert_eq!(dense.len(), d.observations.len());
-        for (a, b) in dense.iter().zip(local_deviations_by_map(&d, &residuals)) {
-            assert!((a - b).abs() <= 1e-12 * b.abs().max(1.0), "{a} vs {b}");
-        }
-    }
-}
+#[path = "robust_tests.rs"]
+mod tests;

@@ -30,7 +30,9 @@ impl Calibration {
         lens + rig + frames + corrections
     }
 
-    /// Noise, bias ratio and G-AIC; σ̂ is `noise_px` when given, else estimated
+    /// Noise, bias ratio and G-AIC computed afresh at `noise_px` (the pipeline's
+    /// own, at the calibration's noise, are in [`Calibration::assessment`]);
+    /// σ̂ is `noise_px` when given, else estimated
     /// from neighbouring corners' residuals. Both are in units of a weight-1
     /// corner (weighted residuals), as the covariance is. `None` without a noise
     /// estimate.

@@ -2,6 +2,7 @@
 //! covariance, computed after every solve (`solver::covariance`) at unit noise,
 //! scaled to the noise σ̂ its trust figures use, and the figures in pixels that
 //! `model::uncertainty` derives from it.
+use crate::model::trust::Trust;
 use crate::model::uncertainty::{
     camera_uncertainty, CameraUncertainty, IntrinsicsCovariance, UncertaintyError,
 };
@@ -15,20 +16,24 @@ pub fn unit_covariance(c: &Calibration) -> Result<Vec<IntrinsicsCovariance>, Unc
 }
 
 impl Calibration {
-    /// Σ_θ of every camera at the calibration's noise σ̂ (the one
-    /// [`Calibration::trust`] uses); rows and columns of held parameters are zero.
-    pub fn intrinsics_covariance(&self) -> Result<Vec<DMatrix<f64>>, UncertaintyError> {
-        let noise = self
-            .trust(self.detector_noise_px)
-            .ok_or(UncertaintyError::NoNoise)?
-            .noise_px;
+    /// Σ_θ of every camera at the noise σ̂ of `trust`; rows and columns of held
+    /// parameters are zero.
+    pub fn intrinsics_covariance_at(
+        &self,
+        trust: Option<&Trust>,
+    ) -> Result<Vec<DMatrix<f64>>, UncertaintyError> {
+        let noise = trust.ok_or(UncertaintyError::NoNoise)?.noise_px;
         let unit = self.covariance.as_ref().map_err(Clone::clone)?;
         Ok(unit.iter().map(|c| &c.unit * (noise * noise)).collect())
     }
 
-    /// Every camera's uncertainty figures (docs/conventions.md §3a) at the noise σ̂.
-    pub fn uncertainty(&self) -> Result<Vec<CameraUncertainty>, UncertaintyError> {
-        let sigma = self.intrinsics_covariance()?;
+    /// Every camera's uncertainty figures (docs/conventions.md §3a) at the noise
+    /// σ̂ of `trust`.
+    pub fn uncertainty_at(
+        &self,
+        trust: Option<&Trust>,
+    ) -> Result<Vec<CameraUncertainty>, UncertaintyError> {
+        let sigma = self.intrinsics_covariance_at(trust)?;
         let unit = self.covariance.as_ref().map_err(Clone::clone)?;
         let cameras = self.dataset.cameras.iter().zip(&self.state.intrinsics);
         cameras
@@ -42,5 +47,21 @@ impl Calibration {
                 })
             })
             .collect()
+    }
+
+    /// [`Calibration::uncertainty_at`] computed afresh at `detector_noise_px`
+    /// (for an analysis that changes it; the pipeline's figures are in
+    /// [`Calibration::assessment`]).
+    pub fn uncertainty(&self) -> Result<Vec<CameraUncertainty>, UncertaintyError> {
+        self.uncertainty_at(self.trust(self.detector_noise_px).as_ref())
+    }
+
+    /// Computes [`Calibration::assessment`] from the residuals, the covariance and
+    /// `detector_noise_px`. The pipeline does this once, last; a caller that
+    /// changes any of them afterwards (a test, an analysis) calls it again.
+    pub fn assess(&mut self) {
+        let trust = self.trust(self.detector_noise_px);
+        let uncertainty = self.uncertainty_at(trust.as_ref());
+        self.assessment = crate::solver::calibrate::Assessment { trust, uncertainty };
     }
 }

@@ -17,6 +17,12 @@ use crate::solver::calibrate::Calibration;
 use crate::solver::residuals::ViewResidual;
 use std::fmt::Write;
 
+/// The file name of camera `camera`'s projection-uncertainty map, which the report
+/// embeds when it is in the output directory before the report is written.
+pub fn uncertainty_file(camera: &str) -> String {
+    format!("uncertainty_{}.svg", crate::app::exports::file_stem(camera))
+}
+
 /// Most views in a camera's RMSE bar chart: the worst ones (all are in the frame table).
 pub const MAX_BARS: usize = 40;
 /// Most rejected outliers listed per camera (all are in `outliers.csv`).
@@ -95,7 +101,7 @@ fn verdicts(c: &Calibration) -> Vec<Verdict> {
             ),
         )
     });
-    if let Some(t) = c.trust(c.detector_noise_px) {
+    if let Some(t) = c.assessment.trust {
         let class = if t.bias_ratio <= report::BIAS_RATIO_OK {
             "ok"
         } else {
@@ -207,7 +213,7 @@ fn key_figures(c: &Calibration) -> Vec<Vec<String>> {
             ),
         ],
     ];
-    if let Some(t) = c.trust(c.detector_noise_px) {
+    if let Some(t) = c.assessment.trust {
         let source = if t.noise_source == "config" {
             "as configured"
         } else {
@@ -226,8 +232,8 @@ fn key_figures(c: &Calibration) -> Vec<Vec<String>> {
             format!("{:.1}, {}", t.g_aic, t.parameters),
         ]);
     }
-    if let Ok(u) = c.uncertainty() {
-        for (cam, u) in c.dataset.cameras.iter().zip(&u) {
+    if let Ok(u) = &c.assessment.uncertainty {
+        for (cam, u) in c.dataset.cameras.iter().zip(u) {
             rows.push(vec![
                 format!(
                     "expected mapping error `expected_mapping_error_px` (px), `{}`",
@@ -311,8 +317,12 @@ fn camera_section(
 /// the rig.
 fn intrinsics_table(c: &Calibration, k: usize) -> String {
     let i = &c.state.intrinsics[k];
-    let uncertainty = c.uncertainty();
-    let std = uncertainty.as_ref().ok().and_then(|u| u.get(k));
+    let std = c
+        .assessment
+        .uncertainty
+        .as_ref()
+        .ok()
+        .and_then(|u| u.get(k));
     let rows: Vec<Vec<String>> = i
         .named()
         .enumerate()
@@ -409,7 +419,7 @@ fn rmse_block(
         });
         (sq / n.max(1) as f64).sqrt()
     };
-    let noise = c.trust(c.detector_noise_px).map(|t| {
+    let noise = c.assessment.trust.map(|t| {
         crate::model::trust::expected_rmse2(t.noise_px, t.parameters, t.residuals)
             .max(0.0)
             .sqrt()
@@ -536,14 +546,14 @@ pub fn uncertainty_section(camera: &str, svg: Option<&[u8]>) -> String {
             page::svg_image_html(bytes, &format!("projection uncertainty of {camera}")),
             page::inline(&format!(
                 "The projection uncertainty of `{camera}` over the image, from `{}`.",
-                super::uncertainty_file(camera)
+                uncertainty_file(camera)
             ))
         ),
         None => format!(
             "<div class=\"placeholder\">{}</div>\n",
             page::inline(&format!(
                 "No projection-uncertainty map for `{camera}` in this run (`{}` was not written).",
-                super::uncertainty_file(camera)
+                uncertainty_file(camera)
             ))
         ),
     }

@@ -21,15 +21,10 @@ use std::path::Path;
 
 /// The report's file name, in every output directory that has one.
 pub use crate::app::fsio::REPORT_HTML as REPORT_FILE;
+pub use calibration::uncertainty_file;
 
 /// Largest uncertainty map embedded; a larger file is left out of the report.
 const MAX_EMBEDDED_BYTES: u64 = 16 << 20;
-
-/// The file name of camera `camera`'s projection-uncertainty map, which the report
-/// embeds when it is in the output directory before the report is written.
-pub fn uncertainty_file(camera: &str) -> String {
-    format!("uncertainty_{}.svg", crate::app::exports::file_stem(camera))
-}
 
 /// Camera `camera`'s uncertainty map from `dir`, if one was written there.
 pub fn read_uncertainty(dir: &Path, camera: &str) -> Option<Vec<u8>> {

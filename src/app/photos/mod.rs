@@ -13,7 +13,7 @@ use crate::app::fsio::write_atomic;
 use crate::app::observations_csv;
 use crate::error::{Error, Result};
 use crate::model::camera::CameraSpec;
-use crate::model::dataset::Dataset;
+use crate::model::dataset::{Dataset, DetectedCorner};
 use crate::model::target::Target;
 use cache::{Cache, Entry, Lookup, Outcome, Status};
 use list::ImageFile;
@@ -319,22 +319,18 @@ fn short_reason(reason: &str) -> String {
 /// The observations of the usable images; a corner's weight is σ_ref/σ, capped at
 /// 1, so its residual is in units of its own noise (as 0.5^level for mrgingham).
 fn dataset_of(images: &[ImageResult], target: Target, cameras: &[CameraSpec]) -> Dataset {
-    let mut rows = Vec::new();
-    let mut weights = Vec::new();
-    for r in images {
-        if !r.outcome.status.usable() {
-            continue;
-        }
-        for c in &r.outcome.corners {
-            rows.push((r.file.camera, r.file.frame, c[0] as usize, [c[1], c[2]]));
-            weights.push(corner_weight(c[3]));
-        }
-    }
-    let mut dataset = Dataset::from_keyed(target, cameras.to_vec(), rows);
-    for (o, w) in dataset.observations.iter_mut().zip(weights) {
-        o.weight = w;
-    }
-    dataset
+    let usable = images.iter().filter(|r| r.outcome.status.usable());
+    let corners = usable.flat_map(|r| {
+        r.outcome.corners.iter().map(|c| DetectedCorner {
+            camera: r.file.camera,
+            frame_id: r.file.frame,
+            // The cache keeps a corner as four floats; the id is a whole number.
+            corner: c[0] as usize,
+            uv: [c[1], c[2]],
+            weight: corner_weight(c[3]),
+        })
+    });
+    Dataset::from_detected(target, cameras.to_vec(), corners)
 }
 
 /// The observation weight of a corner with refinement σ (px): σ_ref/σ in (0, 1].
