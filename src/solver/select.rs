@@ -173,18 +173,13 @@ fn fit_candidates(
     auto.candidates
         .par_iter()
         .map(|&m| {
-            let r = warm
-                .calibrate(
-                    dataset,
-                    &Request {
-                        method: m,
-                        ..request.clone()
-                    },
-                )
-                .map(|mut c| {
-                    c.detector_noise_px = auto.detector_noise_px;
-                    c
-                });
+            let r = warm.calibrate(
+                dataset,
+                &Request {
+                    method: m,
+                    ..request.clone()
+                },
+            );
             tick();
             (m, r)
         })
@@ -254,7 +249,6 @@ fn standard_because(
             ..request.clone()
         },
     )?;
-    c.detector_noise_px = auto.detector_noise_px;
     c.selection = Some(Selection {
         chosen: Method::Standard,
         folds: 0,

@@ -158,13 +158,12 @@ pub fn solve(config: &Config, loaded: &Loaded) -> Result<Calibration> {
             Method::Standard
         }
     };
-    let mut result = run_method(config, &loaded.dataset).inspect_err(|_| {
+    let result = run_method(config, &loaded.dataset).inspect_err(|_| {
         let request = request_of(config, first);
         for h in guard::error_hints(&loaded.dataset, &request, rules_of(config)) {
             eprintln!("hint: {h}");
         }
     })?;
-    result.detector_noise_px = config.calibration.detector_noise_px;
     Ok(result)
 }
 

@@ -1,12 +1,12 @@
 //! Planning a run: the data loaded, the subsets drawn, the header written;
 //! the reference calibration is `run`'s.
+use super::record::{data_fingerprint, AutoRun, Header};
+use super::run::{no_sfm_camera, Measures, Plan, Setup};
 use crate::app::config::{Config, ProtocolConfig, MAX_SUBSETS};
 use crate::app::sfm::Experiment;
 use crate::error::{Error, Result};
 use crate::model::selection::AutoSettings;
 use crate::solver::problem::SolverSettings;
-use super::record::{data_fingerprint, AutoRun, Header};
-use super::run::{no_sfm_camera, Measures, Plan, Setup};
 use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 

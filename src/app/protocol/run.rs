@@ -1,6 +1,9 @@
 //! Running the tasks: the reference calibration and what rows are measured
 //! against, each subset × method calibrated (sharing its subset's warm start)
 //! and turned into a row, in parallel and beside the reference.
+use super::record::{CameraRow, Header, ReferenceInfo, Row, Task};
+use super::refit::{test_rmse, TestError};
+use super::shard::Shard;
 use crate::app::sfm::{Experiment, SfmConfig};
 use crate::error::{Error, Result};
 use crate::model::board::Method;
@@ -13,9 +16,6 @@ use crate::model::uncertainty::CameraUncertainty;
 use crate::solver::calibrate::{calibrate, Calibration, Request, SharedWarmStart};
 use crate::solver::problem::SolverSettings;
 use crate::solver::select::calibrate_auto_sharing;
-use super::record::{CameraRow, Header, ReferenceInfo, Row, Task};
-use super::refit::{test_rmse, TestError};
-use super::shard::Shard;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::OnceLock;

@@ -1,7 +1,7 @@
 //! Sharding: a slice of the task grid (`--shard`, Slurm, Kubernetes), the
 //! file a shard writes, and the merge of shard files back into one run.
-use crate::error::{Error, Result};
 use super::record::{Header, Row};
+use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};
 
 /// `--shard i/N`: the i-th of N disjoint slices of the task grid.

@@ -1,4 +1,10 @@
 //! How `auto` chose per subset: its table and `auto.svg`.
+#[allow(unused_imports)]
+use super::figures::*;
+#[allow(unused_imports)]
+use super::summary::*;
+#[allow(unused_imports)]
+use super::tables::*;
 use crate::app::html_report::page::Table;
 use crate::app::plots::{self, Axes, HLine, Series, PALETTE};
 use crate::app::protocol::{Header, Row};
@@ -6,12 +12,6 @@ use crate::error::Result;
 use crate::model::board::Method;
 use crate::model::metrics::Stat;
 use std::collections::BTreeMap;
-#[allow(unused_imports)]
-use super::summary::*;
-#[allow(unused_imports)]
-use super::figures::*;
-#[allow(unused_imports)]
-use super::tables::*;
 
 /// What `auto` chose per subset and how its calibrations fared against each
 /// fixed method on the same subsets (when the run recorded `auto`).

@@ -1,10 +1,10 @@
 //! `protocol.csv` (one line per task) and `deformations.csv` (one line per bent image).
+#[allow(unused_imports)]
+use super::summary::*;
 use crate::app::protocol::{Header, Row};
 use crate::error::{Error, Result};
 use crate::model::metrics::Stat;
 use std::fmt::Write;
-#[allow(unused_imports)]
-use super::summary::*;
 
 pub(super) fn cell(v: Option<f64>) -> String {
     v.map(|x| x.to_string()).unwrap_or_default()

@@ -1,12 +1,12 @@
 //! The report's SVG figures: errors, intrinsics and mapping error per method,
 //! the bends over the images, the most bent board.
+#[allow(unused_imports)]
+use super::summary::*;
 use crate::app::html_report::page::Figure;
 use crate::app::plots::{self, Axes, HLine, Series, PALETTE};
 use crate::app::protocol::{Header, Row};
 use crate::error::Result;
 use crate::model::board::Method;
-#[allow(unused_imports)]
-use super::summary::*;
 
 /// A figure of the report.
 pub(super) fn figure(file: &str, alt: &str, caption: &str) -> Figure {

@@ -20,14 +20,14 @@ use crate::app::plots::{self};
 use crate::app::protocol::{Header, Row};
 use crate::error::{Error, Result};
 use crate::model::board::HIGHER_BEND_PARAMS;
+use auto::{auto_table, plot_auto, AUTO_SVG};
+pub use csv::{deformations_csv, protocol_csv};
+use figures::*;
 use std::fmt::Write;
 use std::path::Path;
-use auto::{auto_table, plot_auto, AUTO_SVG};
-use figures::*;
 use summary::columns;
-use tables::*;
-pub use csv::{deformations_csv, protocol_csv};
 pub use summary::{camera_key, summarise, MethodSummary, Summary};
+use tables::*;
 
 /// Every table of one dataset's report, in order.
 pub fn report_tables(summary: &Summary, rows: &[Row]) -> Vec<Table> {

@@ -1,14 +1,14 @@
 //! The report's tables: train and test error, intrinsics, mapping error, bends,
 //! the uncertainty check and the failed tasks.
+#[allow(unused_imports)]
+use super::figures::*;
+#[allow(unused_imports)]
+use super::summary::*;
 use crate::app::html_report::page::Table;
 use crate::app::protocol::{Header, Row};
 use crate::model::board::Method;
 use crate::model::metrics::Stat;
 use std::fmt::Write;
-#[allow(unused_imports)]
-use super::summary::*;
-#[allow(unused_imports)]
-use super::figures::*;
 
 pub(super) fn pm(s: Option<&Stat>, scale: f64, digits: usize) -> String {
     match s {

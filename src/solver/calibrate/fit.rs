@@ -1,17 +1,15 @@
 //! A fit's second part, from the warm start on: the method's solve, the noise
 //! that weights the priors, outlier rejection and the result.
+use super::method::{solve_method, with_auto_priors, Solved};
+use super::types::{Assessment, Calibration, Request, Stage, Suspect};
+use super::warm::{lens_prior_reweighted, WarmStart};
 use crate::error::Result;
 use crate::model::board::Method;
 use crate::model::dataset::Dataset;
 use crate::model::uncertainty::UncertaintyError;
-use crate::solver::problem::{
-    rmse, Hold, Problem, SolveReport, State,
-};
+use crate::solver::problem::{rmse, Hold, Problem, SolveReport, State};
 use crate::solver::robust;
 use std::time::Instant;
-use super::method::{solve_method, with_auto_priors, Solved};
-use super::types::{Assessment, Calibration, Request, Stage, Suspect};
-use super::warm::{lens_prior_reweighted, WarmStart};
 
 /// [`fit`]'s second part: the method's own solve from the warm start, the
 /// priors, outlier rejection and the warnings.

@@ -1,16 +1,15 @@
 //! The requested method's own solve after the warm start: its gauge and frozen
 //! corners, the smoothness prior's order test, and the priors with σ = "auto".
+use super::types::{Request, Stage};
+use super::warm::warm_start_settings;
 use crate::error::Result;
 use crate::model::board::Method;
 use crate::model::dataset::Dataset;
 use crate::solver::auto_prior::{AutoPrior, Estimate};
 use crate::solver::problem::{
-    choose_gauge, underobserved_corners, Hold, Problem, SolverSettings, State,
-    WarmUp,
+    choose_gauge, underobserved_corners, Hold, Problem, SolverSettings, State, WarmUp,
 };
 use crate::solver::{auto_prior, robust};
-use super::types::{Request, Stage};
-use super::warm::warm_start_settings;
 
 /// The problem of `method` with its gauge and frozen corners, nothing else held.
 fn method_problem<'a>(

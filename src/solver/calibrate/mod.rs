@@ -14,11 +14,11 @@ mod warm;
 use crate::error::Result;
 use crate::model::dataset::Dataset;
 use crate::solver::problem::SolverSettings;
-use std::sync::OnceLock;
 use fit::fit_from;
-use warm::{warm_start, warm_start_is_loose, warm_start_settings, WarmStart};
 pub use init::{MIN_CORNERS_PER_IMAGE, MIN_IMAGES};
+use std::sync::OnceLock;
 pub use types::{Assessment, Calibration, Request, Stage, Suspect};
+use warm::{warm_start, warm_start_is_loose, warm_start_settings, WarmStart};
 
 /// Runs the whole pipeline on one dataset.
 pub fn calibrate(dataset: &Dataset, request: &Request) -> Result<Calibration> {

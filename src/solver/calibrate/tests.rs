@@ -5,8 +5,8 @@ use super::*;
 use crate::model::board::Method;
 use crate::model::lens::LensModel;
 use crate::model::metrics::mapping_error;
-use crate::solver::problem::Problem;
 use crate::model::synthetic::{Generator, Preset};
+use crate::solver::problem::Problem;
 
 /// The second start's looser solve may stop early only where converging it
 /// would end at the first start's result. Against both starts converged in

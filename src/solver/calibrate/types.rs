@@ -7,9 +7,7 @@ use crate::model::lens::Intrinsics;
 use crate::model::selection::Selection;
 use crate::model::trust::Trust;
 use crate::model::uncertainty::{CameraUncertainty, IntrinsicsCovariance, UncertaintyError};
-use crate::solver::problem::{
-    Hold, Problem, SolveReport, SolverSettings, State,
-};
+use crate::solver::problem::{Hold, Problem, SolveReport, SolverSettings, State};
 
 /// What the user asks of one calibration.
 #[derive(Debug, Clone, PartialEq)]

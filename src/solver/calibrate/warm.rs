@@ -1,18 +1,16 @@
 //! The warm start every method shares: the data checked, the initialisation
 //! and the first `standard` solve, with stray frames re-posed and the lens
 //! registry's second start tried.
+use super::init::{coverage_warnings, initialise};
+use super::types::{Request, Stage};
 use crate::error::Result;
 use crate::model::board::Method;
 use crate::model::dataset::Dataset;
 use crate::model::lens::Intrinsics;
 use crate::model::metrics::mapping_error;
-use crate::solver::problem::{
-    Problem, SolveReport, SolverSettings, State,
-};
+use crate::solver::problem::{Problem, SolveReport, SolverSettings, State};
 use crate::solver::{repose, robust};
 use std::time::Instant;
-use super::init::{coverage_warnings, initialise};
-use super::types::{Request, Stage};
 
 /// Relative tolerance of the `standard` warm start before a deformation method.
 const WARM_START_TOLERANCE: f64 = 1e-3;
