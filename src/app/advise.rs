@@ -480,13 +480,23 @@ pub fn svg(kn: &Knowledge, advice: &Advice) -> String {
         s,
         "<rect x=\"0\" y=\"{h}\" width=\"{w}\" height=\"{legend}\" fill=\"#ffffff\"/>"
     );
-    let _ = writeln!(
-        s,
-        "<text x=\"{:.1}\" y=\"{:.1}\" font-family=\"sans-serif\" font-size=\"{font}\">projection σ {lo:.3} px (grey) to {hi:.3} px (red); expected mapping error now {:.3} px; outlines: the next boards to add, with the error after each</text>",
-        0.01 * w,
-        h + 0.6 * legend,
-        advice.current_error_px
-    );
+    // Two lines, smaller than the labels: one line overflows a 640 px image.
+    let caption = (h / 36.0).round();
+    let lines = [
+        format!(
+            "projection σ {lo:.3} px (grey) to {hi:.3} px (red); expected mapping error now {:.3} px",
+            advice.current_error_px
+        ),
+        "outlines: the next boards to add, each with the expected error after adding it".to_string(),
+    ];
+    for (i, line) in lines.iter().enumerate() {
+        let _ = writeln!(
+            s,
+            "<text x=\"{:.1}\" y=\"{:.1}\" font-family=\"sans-serif\" font-size=\"{caption}\">{line}</text>",
+            0.01 * w,
+            h + (0.4 + 0.35 * i as f64) * legend,
+        );
+    }
     s.push_str("</svg>\n");
     s
 }
