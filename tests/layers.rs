@@ -133,44 +133,12 @@ fn layers_depend_one_way() {
 #[test]
 fn no_import_cycles() {
     let edges = graph();
-    // Depth-first search for a back edge, reporting the cycle it closes.
-    fn visit(
-        node: &str,
-        edges: &BTreeMap<String, BTreeSet<String>>,
-        state: &mut BTreeMap<String, u8>,
-        stack: &mut Vec<String>,
-    ) -> Option<Vec<String>> {
-        state.insert(node.to_string(), 1);
-        stack.push(node.to_string());
-        for next in edges.get(node).into_iter().flatten() {
-            match state.get(next.as_str()) {
-                Some(1) => {
-                    let start = stack.iter().position(|n| n == next).unwrap();
-                    return Some(stack[start..].to_vec());
-                }
-                Some(_) => {}
-                None => {
-                    if let Some(c) = visit(next, edges, state, stack) {
-                        return Some(c);
-                    }
-                }
-            }
-        }
-        stack.pop();
-        state.insert(node.to_string(), 2);
-        None
-    }
-    let mut state = BTreeMap::new();
-    for node in edges.keys() {
-        if !state.contains_key(node) {
-            let cycle = visit(node, &edges, &mut state, &mut Vec::new());
-            assert!(
-                cycle.is_none(),
-                "import cycle: {}",
-                cycle.unwrap().join(" -> ")
-            );
-        }
-    }
+    let cycle = find_cycle(&edges);
+    assert!(
+        cycle.is_none(),
+        "import cycle: {}",
+        cycle.unwrap().join(" -> ")
+    );
 }
 
 #[test]
