@@ -294,6 +294,9 @@ fn chosen_frames_calibrate_at_least_as_well_as_every_tenth() {
         "{}",
         String::from_utf8_lossy(&run10.stderr)
     );
+    let stderr10 = String::from_utf8_lossy(&run10.stderr);
+    let found = stderr10.lines().find(|l| l.starts_with("board found in"));
+    eprintln!("every 10th: {}", found.unwrap_or("?"));
     let tenth_err = mapping_error_of(&dir.path().join("out10"));
     eprintln!("mapping error to the truth: chosen {} frames {chosen:.4} px, every 10th ({} frames) {tenth_err:.4} px", kept.len(), FRAMES / 10);
     assert!(

@@ -117,7 +117,7 @@ pub fn detect_video(
         stamp,
         hash: OnceLock::new(),
     };
-    let mut frames = scan.from_cache(&sampled, &probe.times);
+    let mut frames = scan.all_cached(&sampled, &probe.times);
     if frames.is_none() {
         frames = Some(scan.decode(&probe, sampled.len(), progress)?);
     }
@@ -187,7 +187,7 @@ impl Scan<'_> {
 
     /// Every sampled frame from the cache, or None when one is missing (the
     /// video is then decoded).
-    fn from_cache(&self, sampled: &[usize], times: &[f64]) -> Option<Vec<FrameResult>> {
+    fn all_cached(&self, sampled: &[usize], times: &[f64]) -> Option<Vec<FrameResult>> {
         sampled
             .iter()
             .map(|&index| {
