@@ -1,4 +1,4 @@
-//! The application layer: config, data files, photos and board detection, exports, the evaluation protocol,
+//! The application layer: config, data files, photos, video and board detection, exports, the evaluation protocol,
 //! reports and plots, and the C API. Builds on the model and solver layers.
 pub mod advise;
 pub mod board_json;
@@ -31,3 +31,4 @@ pub mod target_config;
 pub mod target_print;
 pub mod text;
 pub mod uncertainty_plot;
+pub mod video;

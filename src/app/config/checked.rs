@@ -18,6 +18,8 @@ pub enum DataSource {
         base: PathBuf,
         patterns: PhotoPatterns,
     },
+    /// A video whose frames are sampled, detected and chosen (docs/video.md).
+    Video(crate::app::video::VideoSource),
     /// An observations CSV (path resolved against the config's folder).
     Observations(PathBuf),
     /// mrgingham's / mrcal's corners table, with file-name patterns per camera.

@@ -87,6 +87,9 @@ pub struct Entry {
     pub stamp: Stamp,
     /// The detection.
     pub outcome: Outcome,
+    /// A video frame's sharpness (`app::video`), so a rerun need not decode it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sharpness: Option<f64>,
 }
 
 /// The cache file: the settings it is valid for and the entries.
@@ -136,7 +139,7 @@ impl Cache {
         if h == entry.stamp.hash {
             return Lookup::Hit(Entry {
                 stamp: Stamp { hash: h, ..stamp },
-                outcome: entry.outcome.clone(),
+                ..entry.clone()
             });
         }
         Lookup::Miss(Some(h))
@@ -175,7 +178,14 @@ pub fn stamp_of(meta: &std::fs::Metadata) -> Stamp {
 /// and fast enough next to decoding the image; collisions only matter by
 /// accident here, nobody gains by forging one.
 pub fn fnv1a(bytes: &[u8]) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    fnv1a_extend(FNV_START, bytes)
+}
+
+/// FNV-1a's starting value, for [`fnv1a_extend`].
+pub const FNV_START: u64 = 0xcbf2_9ce4_8422_2325;
+
+/// FNV-1a of what `h` hashed followed by `bytes`: a file hashed piece by piece.
+pub fn fnv1a_extend(mut h: u64, bytes: &[u8]) -> u64 {
     for &b in bytes {
         h ^= b as u64;
         h = h.wrapping_mul(0x0000_0100_0000_01b3);
@@ -201,6 +211,7 @@ mod tests {
                 reason: "no chessboard found".into(),
                 corners: vec![],
             },
+            sharpness: None,
         }
     }
 

@@ -78,6 +78,7 @@ pub fn detect_photos(
             let entry = Entry {
                 stamp: d.stamp?,
                 outcome: d.result.outcome.clone(),
+                sharpness: None,
             };
             Some((d.result.file.name.clone(), entry))
         })
@@ -110,7 +111,7 @@ struct Detected {
 
 /// The detector version, its settings and the board: a cache made with other
 /// values is not used.
-fn settings_key(d: &Detector, target: Target) -> String {
+pub(crate) fn settings_key(d: &Detector, target: Target) -> String {
     format!(
         "{}; rows {} cols {}; max_pixels {} min_corners {}{}",
         detect::ALGORITHM,
@@ -221,7 +222,11 @@ fn detect_one(file: &ImageFile, detector: &Detector, target: Target, cache: &Cac
 }
 
 /// The cacheable outcome of one detection.
-fn outcome_of(det: std::result::Result<Detection, Rejection>, width: u32, height: u32) -> Outcome {
+pub(crate) fn outcome_of(
+    det: std::result::Result<Detection, Rejection>,
+    width: u32,
+    height: u32,
+) -> Outcome {
     match det {
         Ok(d) => Outcome {
             width,
