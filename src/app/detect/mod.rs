@@ -13,7 +13,9 @@
 //!    at full precision (for refinement).
 //! 2. The `calib-targets` crate (ChESS X-junction corners + topological grid
 //!    labelling) finds and labels the grid; it is robust to partial views,
-//!    blur and distortion but only ~0.2 px accurate.
+//!    blur and distortion but only ~0.2 px accurate. Its corner response is
+//!    computed coarse to fine (seeds on a downscaled level) first; a view not
+//!    found complete that way is searched again over the full image.
 //! 3. [`refine`]: cornerSubPix-style gradient-orthogonality refinement on the
 //!    full-precision image (window 0.3× the cell, shrunk to 0.4× a corner's own
 //!    spacing where its squares are compressed), which also yields each
