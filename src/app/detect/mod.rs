@@ -73,7 +73,7 @@ use std::path::Path;
 
 /// Identifies the detector's algorithm in the detection cache: change it with any
 /// change that alters results, so detections of an older version are not reused.
-pub const ALGORITHM: &str = "calib-targets 0.16.1 + deformcal refine 2 + grow 1 + orient 2";
+pub const ALGORITHM: &str = "calib-targets 0.16.1 + deformcal refine 2 + grow 2 + orient 2";
 
 /// σ (px) at which [`Corner::weight`] is 0.5, and the reference σ of an
 /// observation weight σ_ref/σ (a clean, sharp corner's σ is about this).

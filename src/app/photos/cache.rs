@@ -28,6 +28,10 @@ pub struct Outcome {
     pub reason: String,
     /// Per corner: index, u, v, σ (px).
     pub corners: Vec<[f64; 4]>,
+    /// The board looks alike turned by 180° and the view was labelled by its
+    /// orientation in the image (`Detection::labelled_by_symmetry`).
+    #[serde(default)]
+    pub by_symmetry: bool,
 }
 
 /// The status column of `detections.csv`.
@@ -188,6 +192,7 @@ mod tests {
                 status: Status::Rejected,
                 reason: "no chessboard found".into(),
                 corners: vec![],
+                by_symmetry: false,
             },
         }
     }

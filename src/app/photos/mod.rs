@@ -49,6 +49,14 @@ pub struct PhotoRun {
     pub output_dir: PathBuf,
 }
 
+impl PhotoRun {
+    /// How many usable views were labelled by the board's symmetry.
+    pub fn labelled_by_symmetry(&self) -> usize {
+        let usable = self.images.iter().filter(|r| r.outcome.status.usable());
+        usable.filter(|r| r.outcome.by_symmetry).count()
+    }
+}
+
 /// Detects the board in the photos of a `DataSource::Photos`, writes the results
 /// into `output_dir` and returns them; `progress` draws a bar on stderr.
 pub fn detect_photos(
@@ -237,6 +245,7 @@ fn outcome_of(det: std::result::Result<Detection, Rejection>, width: u32, height
                 .iter()
                 .map(|c| [c.index as f64, c.uv[0], c.uv[1], c.sigma])
                 .collect(),
+            by_symmetry: d.labelled_by_symmetry,
         },
         Err(r) => Outcome {
             width,
@@ -247,6 +256,7 @@ fn outcome_of(det: std::result::Result<Detection, Rejection>, width: u32, height
             },
             reason: r.to_string(),
             corners: Vec::new(),
+            by_symmetry: false,
         },
     }
 }
