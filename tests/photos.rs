@@ -417,3 +417,58 @@ fn one_photo_reached_by_two_names_is_refused() {
     );
     assert!(!dir.path().join("out").exists());
 }
+
+/// An 8 × 6 board (9 × 7 squares) looks alike turned by 180°: its views are
+/// labelled by their orientation in the image, so a correction per corner of the
+/// printed board cannot use them. `static` is refused with a message and no
+/// output; `auto` leaves `full` out of its default candidates (and says so) and
+/// calibrates.
+#[test]
+fn a_board_alike_turned_by_180_degrees_has_no_per_corner_correction() {
+    let dir = tempfile::tempdir().unwrap();
+    let photos = dir.path().join("photos");
+    std::fs::create_dir_all(&photos).unwrap();
+    for (k, (rvec, dist, shift, _)) in views().into_iter().take(8).enumerate() {
+        let mut sc = scene(6, 8, rvec, dist, shift);
+        sc.seed = k as u64;
+        sc.supersample = 4;
+        let (img, _) = render_board(&sc);
+        img.save(photos.join(format!("img-{k:02}.png"))).unwrap();
+    }
+    let write = |method: &str| {
+        let config = dir.path().join(format!("{method}.toml"));
+        std::fs::write(
+            &config,
+            format!(
+                "[target]\nrows = 6\ncols = 8\nspacing = 0.03\n[[cameras]]\nname = \"cam0\"\n\
+                 width = {W}\nheight = {H}\nmodel = \"radial3\"\n[data]\nphotos = \"photos/img-*.png\"\n\
+                 [calibration]\nmethod = \"{method}\"\n[output]\ndir = \"out-{method}\"\n"
+            ),
+        )
+        .unwrap();
+        config
+    };
+    let out = deformcal(&["--config", write("static").to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("method `static` estimates a correction per corner")
+            && stderr.contains("looks alike turned by 180 degrees"),
+        "{stderr}"
+    );
+    assert!(!dir.path().join("out-static/calibration.json").exists());
+
+    let out = deformcal(&["--config", write("auto").to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("auto left out full"), "{stderr}");
+    let json: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(dir.path().join("out-auto/calibration.json")).unwrap(),
+    )
+    .unwrap();
+    let text = json.to_string();
+    assert!(!json["method"].as_str().unwrap().contains("full"), "{text}");
+    assert!(text.contains("auto left out full"), "{text}");
+    let csv = std::fs::read_to_string(dir.path().join("out-auto/detections.csv")).unwrap();
+    assert!(csv.contains("labelled by its orientation"), "{csv}");
+}

@@ -21,6 +21,10 @@ pub struct Loaded {
     pub files: FrameFiles,
     /// Warnings about the input (file names that look like several cameras).
     pub warnings: Vec<String>,
+    /// Views whose corner ids the detector chose by the board's symmetry: their
+    /// labelling is not tied to the printed board, so a per-corner correction
+    /// cannot use it.
+    pub labelled_by_symmetry: usize,
 }
 
 /// Loads a config's `[data]` with its file names and input warnings; photos are
@@ -28,6 +32,7 @@ pub struct Loaded {
 /// written into the output dir and summarised on stderr.
 pub fn load(config: &Config) -> Result<Loaded> {
     let names: Vec<String> = config.cameras.iter().map(|c| c.name.clone()).collect();
+    let mut labelled_by_symmetry = 0;
     let (dataset, truth, listed, kind) = match &config.data {
         DataSource::Photos { .. } => {
             let run = crate::app::photos::detect_photos(
@@ -46,6 +51,7 @@ pub fn load(config: &Config) -> Result<Loaded> {
                 .iter()
                 .map(|r| (r.file.camera, r.file.frame, r.file.name.clone()))
                 .collect();
+            labelled_by_symmetry = run.labelled_by_symmetry();
             (run.dataset, None, listed, Some(NameSource::Photos))
         }
         DataSource::Video(source) => {
@@ -91,6 +97,7 @@ pub fn load(config: &Config) -> Result<Loaded> {
         truth,
         files,
         warnings,
+        labelled_by_symmetry,
     })
 }
 

@@ -150,6 +150,7 @@ fn rules_of(config: &Config) -> guard::Rules {
 /// The calibration of the loaded data with the config's method; a failed solve
 /// prints the guard rails' hints about the data first.
 pub fn solve(config: &Config, loaded: &Loaded) -> Result<Calibration> {
+    let (config, note) = &without_corrections(config, loaded.labelled_by_symmetry)?;
     let first = match config.calibration.method {
         MethodChoice::Fixed(m) => m,
         MethodChoice::Auto => {
@@ -164,7 +165,47 @@ pub fn solve(config: &Config, loaded: &Loaded) -> Result<Calibration> {
             eprintln!("hint: {h}");
         }
     })?;
+    let mut result = result;
+    result.warnings.extend(note.clone());
     Ok(result)
+}
+
+/// Views labelled by the board's symmetry (a board that looks alike turned by
+/// 180°) carry corner ids that may be turned from one photo to the next: fine
+/// for the intrinsics and the bends, which the pose absorbs it for, but not for
+/// a per-corner correction, whose values belong to a corner of the printed
+/// board. Such a method is refused, and `auto` tries the others (with a
+/// warning saying so).
+fn without_corrections(config: &Config, by_symmetry: usize) -> Result<(Config, Option<String>)> {
+    let mut config = config.clone();
+    if by_symmetry == 0 {
+        return Ok((config, None));
+    }
+    let why = format!(
+        "{by_symmetry} views show a board that looks alike turned by 180 degrees ({} x {} inner corners), so their corner ids follow the photo's orientation, not the printed board",
+        config.target.rows, config.target.cols
+    );
+    let c = &mut config.calibration;
+    match c.method {
+        MethodChoice::Fixed(m) if m.has_correction() => anyhow::bail!(
+            "method `{m}` estimates a correction per corner of the board, but {why}; use a method without one (standard, dynamic) or a board with rows + cols odd (e.g. 9 x 6)"
+        ),
+        MethodChoice::Auto if c.auto_candidates.iter().any(|m| m.has_correction()) => {
+            let left: Vec<String> = c
+                .auto_candidates
+                .iter()
+                .filter(|m| m.has_correction())
+                .map(|m| m.to_string())
+                .collect();
+            c.auto_candidates.retain(|m| !m.has_correction());
+            let note = format!(
+                "auto left out {} (a correction per corner of the board): {why}",
+                left.join(", ")
+            );
+            Ok((config, Some(note)))
+        }
+        _ => Ok((config, None)),
+    }
 }
 
 /// The config's request for one method.

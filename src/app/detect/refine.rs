@@ -116,6 +116,12 @@ fn asymmetry(img: &FloatImage, p: [f64; 2], half: usize) -> f64 {
             vals.push((a, b));
         }
     }
+    symmetry_misfit(&vals)
+}
+
+/// Σ(a − b)² / Σ((a − m)² + (b − m)²) over pairs of grey levels mirrored
+/// through the corner, m their mean.
+fn symmetry_misfit(vals: &[(f64, f64)]) -> f64 {
     let n = (2 * vals.len()) as f64;
     let mean = vals.iter().map(|(a, b)| a + b).sum::<f64>() / n;
     let var: f64 = vals
@@ -211,4 +217,131 @@ fn normal_system(img: &FloatImage, p: [f64; 2], half: usize) -> Option<NormalSys
         }
     }
     (sys.a[0] + sys.a[2] > 0.0).then_some(sys)
+}
+
+/// The local grid frame of a corner: the image vectors from it to its next
+/// corner along the board's two axes (px).
+pub type Axes = [[f64; 2]; 2];
+
+/// Refine `start` in a window shaped by the local grid: a parallelogram
+/// spanning ±`frac` of a cell along each grid vector of `axes`, sampled about
+/// one pixel apart along each, Gaussian-weighted in cell units. The gradient
+/// condition gᵀ(q − p) = 0 does not change under an affine map, so on a
+/// compressed or sheared junction near a fisheye's rim this window covers the
+/// same part of the four squares as a square window does on a square-on
+/// board: it never reaches the neighbouring junctions along the short
+/// diagonal, which a square window sized to the shortest spacing still does.
+/// None as for [`refine_corner`].
+pub fn refine_affine(img: &FloatImage, start: [f64; 2], axes: Axes, frac: f64) -> Option<Refined> {
+    let win = AffineWindow::new(axes, frac)?;
+    let mut p = start;
+    let mut last = None;
+    for _ in 0..MAX_ITERS {
+        let sys = win.normal_system(img, p)?;
+        let d = sys.solve()?;
+        p = [p[0] + d[0], p[1] + d[1]];
+        last = Some((sys, d));
+        if d[0].hypot(d[1]) < EPS {
+            break;
+        }
+    }
+    // Half the window's reach along its shorter axis, as for the square window.
+    if (p[0] - start[0]).hypot(p[1] - start[1]) > 0.5 * win.reach() + 0.5 {
+        return None;
+    }
+    let (sys, d) = last?;
+    Some(Refined {
+        uv: p,
+        sigma: sys.sigma_at(d)?,
+        asymmetry: win.asymmetry(img, p),
+    })
+}
+
+/// The sample grid of [`refine_affine`]: offsets a·e_u + b·e_v for (a, b) on
+/// a grid over [−frac, frac]², with their Gaussian weights.
+struct AffineWindow {
+    /// (offset from the corner in px, weight).
+    samples: Vec<([f64; 2], f64)>,
+    /// Image area (px²) each sample stands for, so sums are per pixel and the
+    /// σ estimate does not shrink with denser sampling.
+    area: f64,
+    axes: Axes,
+    frac: f64,
+}
+
+impl AffineWindow {
+    fn new(axes: Axes, frac: f64) -> Option<AffineWindow> {
+        let [eu, ev] = axes;
+        let (lu, lv) = (eu[0].hypot(eu[1]), ev[0].hypot(ev[1]));
+        let det = (eu[0] * ev[1] - eu[1] * ev[0]).abs();
+        if !(lu.is_finite() && lv.is_finite()) || det < 1.0 || frac <= 0.0 {
+            return None;
+        }
+        // About one sample per pixel along each grid vector.
+        let (nu, nv) = ((frac * lu).ceil().max(2.0), (frac * lv).ceil().max(2.0));
+        let (hu, hv) = (frac / nu, frac / nv);
+        let s2 = 2.0 * (0.5 * frac).powi(2);
+        let mut samples = Vec::new();
+        for j in -(nv as i32)..=nv as i32 {
+            for i in -(nu as i32)..=nu as i32 {
+                let (a, b) = (i as f64 * hu, j as f64 * hv);
+                let q = [a * eu[0] + b * ev[0], a * eu[1] + b * ev[1]];
+                samples.push((q, (-(a * a + b * b) / s2).exp()));
+            }
+        }
+        Some(AffineWindow {
+            samples,
+            area: det * hu * hv,
+            axes,
+            frac,
+        })
+    }
+
+    /// The window's smallest distance (px) from its centre to its border.
+    fn reach(&self) -> f64 {
+        let [eu, ev] = self.axes;
+        let det = (eu[0] * ev[1] - eu[1] * ev[0]).abs();
+        // Distance between the parallelogram's opposite sides, halved.
+        let (lu, lv) = (eu[0].hypot(eu[1]), ev[0].hypot(ev[1]));
+        self.frac * det / lu.max(lv)
+    }
+
+    fn normal_system(&self, img: &FloatImage, p: [f64; 2]) -> Option<NormalSystem> {
+        let mut sys = NormalSystem {
+            a: [0.0; 3],
+            b: [0.0; 2],
+            c: 0.0,
+            count: 0.0,
+        };
+        for &(q, w) in &self.samples {
+            let (x, y) = (p[0] + q[0], p[1] + q[1]);
+            let gx = 0.5 * (img.sample(x + 1.0, y) - img.sample(x - 1.0, y));
+            let gy = 0.5 * (img.sample(x, y + 1.0) - img.sample(x, y - 1.0));
+            let w = w * self.area;
+            let gq = gx * q[0] + gy * q[1];
+            sys.a[0] += w * gx * gx;
+            sys.a[1] += w * gx * gy;
+            sys.a[2] += w * gy * gy;
+            sys.b[0] += w * gx * gq;
+            sys.b[1] += w * gy * gq;
+            sys.c += w * gq * gq;
+            sys.count += self.area;
+        }
+        (sys.a[0] + sys.a[2] > 0.0).then_some(sys)
+    }
+
+    /// [`asymmetry`] over this window: pairs of samples mirrored through `p`.
+    fn asymmetry(&self, img: &FloatImage, p: [f64; 2]) -> f64 {
+        let half = &self.samples[..self.samples.len() / 2];
+        let vals: Vec<(f64, f64)> = half
+            .iter()
+            .map(|&(q, _)| {
+                (
+                    img.sample(p[0] + q[0], p[1] + q[1]),
+                    img.sample(p[0] - q[0], p[1] - q[1]),
+                )
+            })
+            .collect();
+        symmetry_misfit(&vals)
+    }
 }

@@ -132,6 +132,12 @@ pub fn render_with_albedo(scene: &Scene, albedo: Albedo) -> (GrayImage, Vec<Opti
     (img, truth(scene, &optics.rot))
 }
 
+/// The true pixel position of every inner corner (as [`render_board`] returns
+/// it), without rendering.
+pub fn true_corners(scene: &Scene) -> Vec<Option<[f64; 2]>> {
+    truth(scene, &rodrigues(scene.pose.rvec))
+}
+
 /// Exact projections of the inner corners.
 fn truth(scene: &Scene, rot: &[[f64; 3]; 3]) -> Vec<Option<[f64; 2]>> {
     (0..scene.rows * scene.cols)

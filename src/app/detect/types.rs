@@ -7,7 +7,7 @@ use crate::app::detect::charuco_spec::CharucoSpec;
 /// Identifies the detector's algorithm in the detection cache: change it with any
 /// change that alters results, so detections of an older version are not reused.
 pub const ALGORITHM: &str =
-    "calib-targets 0.16.1 + deformcal refine 2 + grow 1 + orient 2 + coarse to fine 1";
+    "calib-targets 0.16.1 + deformcal refine 2 + grow 2 + orient 2 + coarse to fine 1";
 
 /// The reference σ (px) of a corner's observation weight σ_ref/σ: a clean,
 /// sharp corner's σ is about this.

@@ -35,6 +35,10 @@ pub struct Outcome {
     pub reason: String,
     /// The corners exactly as the detector gave them (id, pixel, weight, σ).
     pub corners: Vec<Corner>,
+    /// The board looks alike turned by 180° and the view was labelled by its
+    /// orientation in the image (`Detection::labelled_by_symmetry`).
+    #[serde(default)]
+    pub by_symmetry: bool,
 }
 
 /// The status column of `detections.csv`.
@@ -210,6 +214,7 @@ mod tests {
                 status: Status::Rejected,
                 reason: "no chessboard found".into(),
                 corners: vec![],
+                by_symmetry: false,
             },
             sharpness: None,
         }

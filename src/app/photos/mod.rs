@@ -49,6 +49,14 @@ pub struct PhotoRun {
     pub output_dir: PathBuf,
 }
 
+impl PhotoRun {
+    /// How many usable views were labelled by the board's symmetry.
+    pub fn labelled_by_symmetry(&self) -> usize {
+        let usable = self.images.iter().filter(|r| r.outcome.status.usable());
+        usable.filter(|r| r.outcome.by_symmetry).count()
+    }
+}
+
 /// Detects the board in the photos of a `DataSource::Photos`, writes the results
 /// into `output_dir` and returns them; `progress` draws a bar on stderr.
 pub fn detect_photos(
@@ -238,6 +246,7 @@ pub(crate) fn outcome_of(
             },
             reason: d.note().to_string(),
             corners: d.corners,
+            by_symmetry: d.labelled_by_symmetry,
         },
         Err(r) => Outcome {
             width,
@@ -248,6 +257,7 @@ pub(crate) fn outcome_of(
             },
             reason: r.to_string(),
             corners: Vec::new(),
+            by_symmetry: false,
         },
     }
 }
