@@ -1,9 +1,11 @@
-//! Heat maps drawn as one embedded PNG instead of one SVG rectangle per cell: a
-//! 64 × 40 map as rectangles was 2 560 elements and a quarter of a megabyte of
-//! SVG, and the most expensive part of writing the results. The chart draws a
-//! placeholder rectangle where the cells go (so plotters places it, and what is
-//! drawn after it stays on top); [`embed`] swaps it for an `<image>` of the cells,
-//! shown unsmoothed, so every cell keeps its one colour as before.
+//! What plotters would draw as thousands of SVG elements, drawn as one: a heat
+//! map as one embedded PNG instead of one rectangle per cell (a 64 × 40 map was
+//! 2 560 elements and a quarter of a megabyte), many arrows as one `<path>`.
+//! These were the most expensive part of writing a calibration's results. The
+//! chart draws a placeholder rectangle where the element goes (so plotters places
+//! it, and what is drawn after it stays on top); [`splice`] swaps it for the
+//! element. A heat map's image is shown unsmoothed, so every cell keeps its one
+//! colour as before.
 use crate::app::html_report::page::base64;
 use crate::app::plots::{pe, Drawn};
 use image::codecs::png::{CompressionType, FilterType, PngEncoder};
@@ -60,24 +62,56 @@ fn attribute<'a>(tag: &'a str, name: &str) -> Option<&'a str> {
     Some(&tag[start..start + len])
 }
 
-/// Replaces the placeholder [`placeholder`] drew in `svg` with the cells as an
-/// embedded PNG at the same place and size.
-pub fn embed(svg: &mut String, cells: &Cells) -> Result<(), String> {
+/// Replaces the placeholder [`placeholder`] drew in `svg` with the element `make`
+/// returns for the placeholder's tag.
+pub fn splice(
+    svg: &mut String,
+    make: impl FnOnce(&str) -> Result<String, String>,
+) -> Result<(), String> {
     let mark = format!("fill=\"#{:02X}{:02X}{:02X}\"", MARK.0, MARK.1, MARK.2);
-    let missing = || "the heat map's placeholder is missing from the SVG".to_string();
+    let missing = || "a placeholder is missing from the SVG".to_string();
     let at = svg.find(&mark).ok_or_else(missing)?;
     let start = svg[..at].rfind("<rect").ok_or_else(missing)?;
     let end = at + svg[at..].find("/>").ok_or_else(missing)? + 2;
-    let tag = &svg[start..end];
-    let [x, y, w, h] = ["x", "y", "width", "height"].map(|a| attribute(tag, a).unwrap_or("0"));
-    let image = format!(
-        "<image x=\"{x}\" y=\"{y}\" width=\"{w}\" height=\"{h}\" preserveAspectRatio=\"none\" \
-         image-rendering=\"optimizeSpeed\" style=\"image-rendering:pixelated\" \
-         href=\"data:image/png;base64,{}\"/>",
-        base64(&png(cells)?)
-    );
-    svg.replace_range(start..end, &image);
+    let element = make(&svg[start..end])?;
+    svg.replace_range(start..end, &element);
     Ok(())
+}
+
+/// Replaces the placeholder [`placeholder`] drew in `svg` with the cells as an
+/// embedded PNG at the same place and size.
+pub fn embed(svg: &mut String, cells: &Cells) -> Result<(), String> {
+    let png = png(cells)?;
+    splice(svg, |tag| {
+        let [x, y, w, h] = ["x", "y", "width", "height"].map(|a| attribute(tag, a).unwrap_or("0"));
+        Ok(format!(
+            "<image x=\"{x}\" y=\"{y}\" width=\"{w}\" height=\"{h}\" preserveAspectRatio=\"none\" \
+             image-rendering=\"optimizeSpeed\" style=\"image-rendering:pixelated\" \
+             href=\"data:image/png;base64,{}\"/>",
+            base64(&png)
+        ))
+    })
+}
+
+/// One `<path>` of polylines given in pixels (each drawn as plotters draws a
+/// `PathElement`, in one element), stroked in `colour` at `opacity` and `width`.
+pub fn polylines_path(
+    lines: impl IntoIterator<Item = Vec<(i32, i32)>>,
+    colour: RGBColor,
+    opacity: f64,
+    width: u32,
+) -> String {
+    use std::fmt::Write;
+    let mut d = String::new();
+    for line in lines {
+        for (k, (x, y)) in line.into_iter().enumerate() {
+            let _ = write!(d, "{}{x} {y}", if k == 0 { "M" } else { "L" });
+        }
+    }
+    format!(
+        "<path fill=\"none\" opacity=\"{opacity}\" stroke=\"#{:02X}{:02X}{:02X}\" stroke-width=\"{width}\" d=\"{d}\"/>",
+        colour.0, colour.1, colour.2
+    )
 }
 
 #[cfg(test)]
@@ -152,5 +186,12 @@ mod tests {
         // What was drawn after the cells stays on top of them.
         assert!(svg.find("<polyline").unwrap() > image, "{svg}");
         assert!(embed(&mut svg, &cells).is_err());
+        let path = polylines_path(
+            [vec![(1, 2), (3, 4)], vec![(5, 6), (7, 8), (9, 10)]],
+            BLACK,
+            0.8,
+            1,
+        );
+        assert!(path.contains("d=\"M1 2L3 4M5 6L7 8L9 10\""), "{path}");
     }
 }

@@ -91,18 +91,24 @@ pub fn residual_quiver(
     scale: f64,
 ) -> Result<String> {
     let size = image_figure(width, height, 0);
-    plots::svg(title, size, |root| {
+    // Thousands of arrows: one <path> spliced in for them (`raster`), not one
+    // element each.
+    let mut arrows = String::new();
+    let mut svg = plots::svg(title, size, |root| {
         let (top, key) = root.split_vertically(size.1 - KEY);
         let mut chart = image_chart(&top, title, width, height)?;
-        let style = PALETTE[0].mix(0.8).stroke_width(1);
-        chart
-            .draw_series(a.arrows.iter().map(|(p, r)| {
-                PathElement::new(
-                    plots::arrow((p[0], p[1]), (r[0] * scale, r[1] * scale), 0.3),
-                    style,
-                )
-            }))
-            .map_err(pe)?;
+        arrows = raster::polylines_path(
+            a.arrows.iter().map(|(p, r)| {
+                plots::arrow((p[0], p[1]), (r[0] * scale, r[1] * scale), 0.3)
+                    .iter()
+                    .map(|q| chart.backend_coord(q))
+                    .collect()
+            }),
+            PALETTE[0],
+            0.8,
+            1,
+        );
+        raster::placeholder(&mut chart, (-0.5, -0.5), (-0.5, -0.5))?;
         chart
             .draw_series(
                 rejected
@@ -124,7 +130,10 @@ pub fn residual_quiver(
             ),
         ];
         plots::key_strip(&key, KEY_X, &items)
-    })
+    })?;
+    raster::splice(&mut svg, |_| Ok(arrows))
+        .map_err(|e| crate::error::Error::Invalid(format!("{title}: plotting failed: {e}")))?;
+    Ok(svg)
 }
 
 /// A label cut to at most `n` characters, keeping its end (a file name's tail
