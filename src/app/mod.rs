@@ -22,6 +22,7 @@ pub mod photos;
 pub mod plots;
 pub mod protocol;
 pub mod protocol_report;
+pub mod raster;
 pub mod report;
 pub mod sfm;
 pub mod sfm_report;

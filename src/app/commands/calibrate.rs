@@ -181,7 +181,16 @@ pub fn run_method(config: &Config, dataset: &Dataset) -> Result<Calibration> {
     let c = &config.calibration;
     let request = |method| request_of(config, method);
     match c.method {
-        MethodChoice::Fixed(m) => Ok(calibrate(dataset, &request(m))?),
+        MethodChoice::Fixed(m) => {
+            let what = format!(
+                "{m}: calibrating {} images ({} corners)",
+                dataset.num_frames(),
+                dataset.observations.len()
+            );
+            Ok(super::with_progress_line(&what, || {
+                calibrate(dataset, &request(m))
+            })?)
+        }
         MethodChoice::Auto => {
             let auto = AutoSettings::from(c);
             let folds = crate::solver::select::fold_count(dataset.num_frames(), &auto);

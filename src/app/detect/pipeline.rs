@@ -4,9 +4,10 @@
 //! is a small function so failures map cleanly onto a `Rejection`.
 
 use crate::app::detect::grow;
+use crate::app::detect::load;
 use crate::app::detect::orient::{self, Labelled, OrientError};
 use crate::app::detect::refine::{self, FloatImage};
-use crate::app::detect::{load, Corner, Detection, Detector, Rejection, SIGMA_REF};
+use crate::app::detect::types::{Corner, Detection, Detector, Rejection};
 use calib_targets::chessboard::ChessboardParams;
 use calib_targets::detect as ct;
 use std::collections::HashMap;
@@ -56,12 +57,7 @@ pub(crate) fn detect(
     let mut corners: Vec<Corner> = indexed
         .corners
         .into_iter()
-        .map(|(index, c)| Corner {
-            index,
-            uv: c.uv,
-            sigma: c.sigma,
-            weight: 1.0 / (1.0 + (c.sigma / SIGMA_REF).powi(2)),
-        })
+        .map(|(index, c)| Corner::new(index, c.uv, c.sigma))
         .collect();
     corners.sort_by_key(|c| c.index);
     corners.dedup_by_key(|c| c.index);

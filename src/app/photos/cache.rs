@@ -5,7 +5,10 @@
 //! A file whose size and mtime are unchanged is trusted without reading it (the
 //! fast path, as `git` does for its index); otherwise its content is hashed, so a
 //! copied or touched but identical file is still a hit. The whole cache is valid
-//! only for the detector version and settings and the board it was made with.
+//! only for its own format [`VERSION`], the detector version and settings and the
+//! board it was made with; a cache of another format or a broken file is a miss
+//! for every image, never an error.
+use crate::app::detect::Corner;
 use crate::app::fsio::write_atomic;
 use crate::error::Result;
 use serde::{Deserialize, Serialize};
@@ -14,6 +17,10 @@ use std::path::Path;
 
 /// The cache file's name in the output dir.
 pub const FILE_NAME: &str = "detections.cache.json";
+
+/// The format of the cache file; raise it whenever what an entry holds changes,
+/// so that older files are read as misses. 2: typed corners with their weight.
+pub const VERSION: u32 = 2;
 
 /// What a detection produced for one image, as kept in the cache.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -26,8 +33,8 @@ pub struct Outcome {
     pub status: Status,
     /// Why the image was rejected or unreadable; empty otherwise.
     pub reason: String,
-    /// Per corner: index, u, v, σ (px).
-    pub corners: Vec<[f64; 4]>,
+    /// The corners exactly as the detector gave them (id, pixel, weight, σ).
+    pub corners: Vec<Corner>,
 }
 
 /// The status column of `detections.csv`.
@@ -88,6 +95,9 @@ pub struct Entry {
 /// The cache file: the settings it is valid for and the entries.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct Cache {
+    /// The file's format, [`VERSION`] (0 in a file from before it was recorded).
+    #[serde(default)]
+    pub version: u32,
     /// Detector version, settings and board; any change voids every entry.
     pub settings: String,
     /// By image name relative to the config's folder.
@@ -95,10 +105,12 @@ pub struct Cache {
 }
 
 impl Cache {
-    /// The cache in `dir` if it exists, is readable and was made with `settings`;
-    /// otherwise an empty one (a broken cache only costs a new detection).
+    /// The cache in `dir` if it exists, is readable, of this [`VERSION`] and
+    /// made with `settings`; otherwise an empty one (an old or broken cache only
+    /// costs a new detection).
     pub fn load(dir: &Path, settings: &str) -> Cache {
         let fresh = Cache {
+            version: VERSION,
             settings: settings.to_string(),
             images: BTreeMap::new(),
         };
@@ -106,7 +118,7 @@ impl Cache {
             return fresh;
         };
         match serde_json::from_slice::<Cache>(&text) {
-            Ok(c) if c.settings == settings => c,
+            Ok(c) if c.version == VERSION && c.settings == settings => c,
             _ => fresh,
         }
     }
@@ -229,6 +241,32 @@ mod tests {
             c.lookup("b.png", s(10, 5), || 99),
             Lookup::Miss(None)
         ));
+    }
+
+    #[test]
+    fn an_old_or_broken_cache_file_is_empty() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut c = Cache::load(dir.path(), "s");
+        assert_eq!(c.version, VERSION);
+        let mut e = entry(10, 5, 99);
+        e.outcome.status = Status::Complete;
+        e.outcome.corners = vec![Corner::new(3, [1.5, 2.25], 0.2)];
+        c.images.insert("a.png".into(), e.clone());
+        c.save(dir.path()).unwrap();
+        let back = Cache::load(dir.path(), "s");
+        assert_eq!(back.images["a.png"], e);
+        assert!(Cache::load(dir.path(), "other settings").images.is_empty());
+        // The format before typed corners: no version, a corner as 4 floats.
+        let old = r#"{"settings":"s","images":{"a.png":{"stamp":{"size":10,"mtime_ns":5,"hash":99},
+            "outcome":{"width":1,"height":1,"status":"complete","reason":"","corners":[[3.0,1.5,2.25,0.2]]}}}}"#;
+        std::fs::write(dir.path().join(FILE_NAME), old).unwrap();
+        assert!(Cache::load(dir.path(), "s").images.is_empty());
+        // The same with a version number of the current format but the old corners.
+        let mixed = old.replacen('{', &format!("{{\"version\":{VERSION},"), 1);
+        std::fs::write(dir.path().join(FILE_NAME), mixed).unwrap();
+        assert!(Cache::load(dir.path(), "s").images.is_empty());
+        std::fs::write(dir.path().join(FILE_NAME), b"{\"version\":2,\"sett").unwrap();
+        assert!(Cache::load(dir.path(), "s").images.is_empty());
     }
 
     #[test]

@@ -304,21 +304,22 @@ fn candidate(f: &FrameResult) -> Candidate {
             .outcome
             .corners
             .iter()
-            .map(|c| [c[0], c[1], c[2]])
+            .map(|c| [c.index as f64, c.uv[0], c.uv[1]])
             .collect(),
     }
 }
 
-/// The observations of the kept frames, by video frame number.
+/// The observations of the kept frames, by video frame number, each corner with
+/// the weight the detector gave it.
 fn dataset_of(frames: &[FrameResult], target: Target, camera: &CameraSpec) -> Dataset {
     let kept = frames.iter().filter(|f| f.verdict == Verdict::Kept);
     let corners = kept.flat_map(|f| {
         f.outcome.corners.iter().map(|c| DetectedCorner {
             camera: 0,
             frame_id: f.index as i64,
-            corner: c[0] as usize,
-            uv: [c[1], c[2]],
-            weight: photos::corner_weight(c[3]),
+            corner: c.index,
+            uv: c.uv,
+            weight: c.weight,
         })
     });
     Dataset::from_detected(target, vec![camera.clone()], corners)
@@ -355,6 +356,7 @@ fn write_outputs(run: &VideoRun, stamp: Stamp, settings: &str, camera: &CameraSp
     )?;
     observations_csv::write(&run.dataset, &dir.join("observations.csv"))?;
     let cache = Cache {
+        version: cache::VERSION,
         settings: settings.to_string(),
         images: run
             .frames

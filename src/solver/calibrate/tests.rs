@@ -4,7 +4,7 @@ use super::warm::from_second_start;
 use super::*;
 use crate::model::board::Method;
 use crate::model::lens::LensModel;
-use crate::model::metrics::mapping_error;
+use crate::model::metrics::{mapping_error, mapping_error_rot};
 use crate::model::synthetic::{Generator, Preset};
 use crate::solver::problem::Problem;
 
@@ -144,6 +144,70 @@ fn a_shared_warm_start_gives_each_method_what_fit_gives() {
         assert_eq!(e, fit(&dataset, &request).unwrap_err().to_string());
         assert!(e.contains("at least 3"), "{e}");
     }
+}
+
+/// A few outliers among thousands of observations (at most
+/// `KEEP_FIT_REJECTED_SHARE` of them rejected): the fit that rejected them
+/// stands, without the second fit from scratch, and is that fit's answer within
+/// 0.01 px, as close to the true lens.
+#[test]
+fn a_few_rejected_among_thousands_keep_the_fit_that_rejected_them() {
+    let (mut dataset, truth) = Generator::new(Preset::T2, Some(40), 5).generate();
+    let displaced = [(3, 40), (17, 100), (29, 7)];
+    for (frame, corner) in displaced {
+        let o = dataset
+            .observations
+            .iter_mut()
+            .find(|o| o.frame == frame && o.corner == corner)
+            .expect("observed");
+        o.uv[0] += 12.0;
+    }
+    let request = |outlier_k| Request {
+        method: Method::Full,
+        settings: SolverSettings {
+            outlier_k,
+            ..SolverSettings::default()
+        },
+        gauge: None,
+    };
+    let c = fit(&dataset, &request(4.0)).unwrap();
+    for (frame, corner) in displaced {
+        assert!(
+            c.rejected
+                .iter()
+                .any(|r| r.frame == dataset.frame_ids[frame] && r.corner == corner),
+            "frame {frame} corner {corner} kept: {:?}",
+            c.rejected
+        );
+    }
+    let total = c.dataset.observations.len() + c.rejected.len();
+    assert!(c.rejected.len() as f64 <= KEEP_FIT_REJECTED_SHARE * total as f64);
+    let first_full = c.stages.iter().position(|s| s.method == Method::Full);
+    let restarted = c.stages[first_full.unwrap()..]
+        .iter()
+        .any(|s| s.method == Method::Standard);
+    assert!(!restarted, "fitted again from scratch: {:?}", c.stages);
+    let fresh = fit(&c.dataset, &request(0.0)).unwrap();
+    let cam = &dataset.cameras[0];
+    let px = |a: &crate::model::lens::Intrinsics, b: &crate::model::lens::Intrinsics| {
+        mapping_error(a, b, cam.width, cam.height)
+    };
+    let apart = px(&c.state.intrinsics[0], &fresh.state.intrinsics[0]);
+    // To the truth up to the rotation a fit cannot tell from the lens.
+    let to_truth = |c: &Calibration| {
+        mapping_error_rot(
+            &truth.intrinsics[0],
+            &c.state.intrinsics[0],
+            cam.width,
+            cam.height,
+        )
+    };
+    let (kept, afresh) = (to_truth(&c), to_truth(&fresh));
+    eprintln!(
+        "{apart:.5} px from the fit afresh; to the truth {kept:.4} px, afresh {afresh:.4} px"
+    );
+    assert!(apart <= 0.01, "{apart} px");
+    assert!(kept <= afresh + 0.01, "{kept} against {afresh} px");
 }
 
 /// Two fits agree bit for bit in everything but their timings.
