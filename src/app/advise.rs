@@ -514,3 +514,25 @@ fn colour(t: f64) -> String {
     let b = (200.0 * (1.0 - t) + 40.0 * t) as u8;
     format!("#{r:02x}{g:02x}{b:02x}")
 }
+
+/// What camera `k` of a finished calibration knows, from the covariance the
+/// pipeline already computed (its inverse is the information so far, at unit
+/// noise; nothing is solved again) and its noise estimate; `None` when the
+/// calibration has no covariance or no noise estimate.
+pub fn knowledge_of(c: &crate::solver::calibrate::Calibration, k: usize) -> Option<Knowledge> {
+    let cov = c.covariance.as_ref().ok()?.get(k)?;
+    let noise_px = c.assessment.trust.as_ref()?.noise_px;
+    let idx = free_indices(&cov.free);
+    let block = DMatrix::from_fn(idx.len(), idx.len(), |a, b| cov.unit[(idx[a], idx[b])]);
+    let information = block.cholesky()?.inverse();
+    let cam = c.dataset.cameras.get(k)?;
+    Some(Knowledge {
+        intrinsics: *c.state.intrinsics.get(k)?,
+        width: cam.width,
+        height: cam.height,
+        free: cov.free.clone(),
+        target: c.dataset.target,
+        noise_px,
+        information,
+    })
+}

@@ -212,20 +212,20 @@ impl Checker<'_> {
         if path.as_os_str().is_empty() {
             return Err(self.err("data.video: the file name must not be empty".into()));
         }
-        let stride = data.stride.unwrap_or(crate::app::video::DEFAULT_STRIDE);
+        let stride = data.stride.unwrap_or(super::checked::DEFAULT_STRIDE);
         if !(1..=10_000).contains(&stride) {
             return Err(self.err(format!("data.stride must be 1 to 10000, not {stride}")));
         }
         let max_frames = data
             .max_frames
-            .unwrap_or(crate::app::video::DEFAULT_MAX_FRAMES);
-        if !(crate::app::photos::MIN_IMAGES..=MAX_IMAGES).contains(&max_frames) {
+            .unwrap_or(super::checked::DEFAULT_MAX_FRAMES);
+        if !(super::checked::MIN_MAX_FRAMES..=MAX_IMAGES).contains(&max_frames) {
             return Err(self.err(format!(
                 "data.max_frames must be {} to {MAX_IMAGES}, not {max_frames}",
-                crate::app::photos::MIN_IMAGES
+                super::checked::MIN_MAX_FRAMES
             )));
         }
-        Ok(DataSource::Video(crate::app::video::VideoSource {
+        Ok(DataSource::Video(super::checked::VideoSource {
             path: self.base.join(path),
             name: path.to_string_lossy().replace('\\', "/"),
             stride,

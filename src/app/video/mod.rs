@@ -8,6 +8,7 @@
 pub mod choose;
 pub mod ffmpeg;
 
+pub use crate::app::config::VideoSource;
 use crate::app::detect::{self, Detector, Rejection};
 use crate::app::fsio::write_atomic;
 use crate::app::observations_csv;
@@ -21,24 +22,6 @@ use choose::{Candidate, Verdict};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
-
-/// `[data] stride` when the config gives none: 6 frames a second of a 30 fps video.
-pub const DEFAULT_STRIDE: usize = 5;
-/// `[data] max_frames` when the config gives none.
-pub const DEFAULT_MAX_FRAMES: usize = 40;
-
-/// The video and how to sample it (`[data] video`, `stride`, `max_frames`).
-#[derive(Debug, Clone, PartialEq)]
-pub struct VideoSource {
-    /// The file.
-    pub path: PathBuf,
-    /// The name the config gives it (relative to the config's folder).
-    pub name: String,
-    /// Every `stride`-th frame is decoded.
-    pub stride: usize,
-    /// At most this many frames are calibrated from.
-    pub max_frames: usize,
-}
 
 /// One sampled frame and what became of it.
 #[derive(Debug, Clone)]
@@ -326,7 +309,8 @@ fn candidate(f: &FrameResult) -> Candidate {
     }
 }
 
-/// The observations of the kept frames, by video frame number.
+/// The observations of the kept frames, by video frame number, each corner with
+/// the weight the detector gave it.
 fn dataset_of(frames: &[FrameResult], target: Target, camera: &CameraSpec) -> Dataset {
     let kept = frames.iter().filter(|f| f.verdict == Verdict::Kept);
     let corners = kept.flat_map(|f| {
