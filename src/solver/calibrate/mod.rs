@@ -66,7 +66,7 @@ pub fn fit(dataset: &Dataset, request: &Request) -> Result<Calibration> {
 /// `opencv5` `standard` ended 0.03 px from the fit afresh (both 0.013–0.017 px
 /// from the converged optimum), where `dynamic` and `full` stayed within 0.002 px.
 fn without_footprint(first: Calibration, request: &Request) -> Result<Calibration> {
-    if keeps_first_fit(&first, request) {
+    if first.rejected.is_empty() || keeps_first_fit(&first, request) {
         return Ok(first);
     }
     let kept = Request {
