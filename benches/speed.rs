@@ -212,7 +212,7 @@ fn growth(sizes: &[usize], methods: &[Method]) -> bool {
             if !c.rejected.is_empty() {
                 // Only what the check needs is kept (peak memory).
                 let (kept_data, intrinsics, rejected) =
-                    (c.dataset, c.state.intrinsics[0].clone(), c.rejected.len());
+                    (c.dataset, c.state.intrinsics[0], c.rejected.len());
                 // The previous pipeline's answer: the kept observations fitted
                 // afresh (what `without_footprint` did for any rejection).
                 let mut kept = request(method, false);

@@ -166,13 +166,7 @@ fn a_few_rejected_among_thousands_keep_the_fit_that_rejected_them() {
         let (mut dataset, truth) = Generator::new(Preset::T2, Some(60), 5 + k as u64)
             .with_models(&[model])
             .generate();
-        let n = dataset.observations.len();
-        let mut displaced = Vec::new();
-        for i in [n / 9, n / 2, 7 * n / 9] {
-            let o = &mut dataset.observations[i];
-            o.uv[0] += 12.0;
-            displaced.push((dataset.frame_ids[o.frame], o.corner));
-        }
+        let displaced = displace_three(&mut dataset);
         for method in [
             Method::Standard,
             Method::Static,
@@ -233,6 +227,18 @@ fn a_few_rejected_among_thousands_keep_the_fit_that_rejected_them() {
         }
     }
     assert!(kept_fits >= 8, "{kept_fits} fits kept");
+}
+
+/// Moves three corners 12 px; their (frame id, corner).
+fn displace_three(dataset: &mut Dataset) -> Vec<(i64, usize)> {
+    let n = dataset.observations.len();
+    let mut displaced = Vec::new();
+    for i in [n / 9, n / 2, 7 * n / 9] {
+        let o = &mut dataset.observations[i];
+        o.uv[0] += 12.0;
+        displaced.push((dataset.frame_ids[o.frame], o.corner));
+    }
+    displaced
 }
 
 /// Two fits agree bit for bit in everything but their timings.
