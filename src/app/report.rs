@@ -56,8 +56,8 @@ fn rejection_line(c: &Calibration) -> String {
         _ if k <= 0.0 => "outlier rejection: off (calibration.outlier_k = 0)".to_string(),
         0 => format!("outliers rejected: none beyond {k}σ"),
         n => format!(
-            "outliers rejected: {n} beyond {k}σ (listed in outliers.csv); the result is a fresh \
-             calibration of the observations kept"
+            "outliers rejected: {n} beyond {k}σ (listed in outliers.csv); the result is the \
+             calibration of the observations kept alone"
         ),
     }
 }

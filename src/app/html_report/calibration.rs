@@ -151,7 +151,7 @@ fn verdicts(c: &Calibration) -> Vec<Verdict> {
                 if c.rejected.is_empty() {
                     ""
                 } else {
-                    "; the result is a fresh calibration of the observations kept"
+                    "; the result is the calibration of the observations kept alone"
                 }
             ),
         )
