@@ -91,7 +91,7 @@ pub fn to_float(img: &DynamicImage) -> FloatImage {
 pub fn to_gray8(f: &FloatImage) -> GrayImage {
     let mut hist = [0usize; 1024];
     for &v in &f.data {
-        hist[((v / 255.0 * 1023.0).clamp(0.0, 1023.0)) as usize] += 1;
+        hist[((v * (1023.0 / 255.0)).clamp(0.0, 1023.0)) as usize] += 1;
     }
     let n = f.data.len();
     let pct = |q: f64| {
@@ -115,7 +115,9 @@ pub fn to_gray8(f: &FloatImage) -> GrayImage {
     let data = f
         .data
         .iter()
-        .map(|&v| ((v - lo) * scale).round().clamp(0.0, 255.0) as u8)
+        // +0.5 and truncation rounds as `round` does on [0, 255] without a
+        // libm call per pixel.
+        .map(|&v| ((v - lo) * scale + 0.5).clamp(0.0, 255.0) as u8)
         .collect();
     GrayImage::from_raw(f.width as u32, f.height as u32, data)
         .expect("buffer has width*height bytes")
