@@ -204,7 +204,7 @@ fn swapped_hint(input: &Dataset, request: &Request, failed: f64, rules: Rules) -
 /// "the lens may need model X", when another lens model fits (a fisheye taken for
 /// a pinhole lens, or a wide lens beyond radial3).
 fn lens_hint(input: &Dataset, request: &Request, failed: f64, rules: Rules) -> Option<String> {
-    for model in [LensModel::Kb4, LensModel::OpenCv8] {
+    for model in LensModel::WIDEST {
         if input.cameras.iter().all(|cam| cam.model == model) {
             continue;
         }

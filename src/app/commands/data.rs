@@ -3,6 +3,7 @@
 //! board detected in a config's photos).
 use crate::app::config::Config;
 use crate::app::fsio::OutputSet;
+use crate::model::lens::LensModel;
 use crate::model::synthetic::{Generator, Preset, MAX_IMAGES};
 use anyhow::{Context, Result};
 use std::path::PathBuf;
@@ -25,8 +26,8 @@ pub struct GenerateArgs {
     /// Cameras on the simulated rig, 0.3 m apart (default: the preset's).
     #[arg(long)]
     pub cameras: Option<usize>,
-    /// Lens model of the simulated cameras: pinhole, radial3, opencv5, opencv8, kb4 or ds.
-    #[arg(long, default_value = "radial3")]
+    /// Lens model of the simulated cameras (default: the registry's default model).
+    #[arg(long, default_value_t = LensModel::default().name().to_string())]
     pub model: String,
 }
 

@@ -35,6 +35,11 @@ impl LensModel {
         LensModel::Pinhole,
     ];
 
+    /// The widest perspective and the widest fisheye model: what a calibration
+    /// that fits badly is tried again with, to tell the user whether the lens
+    /// model is the problem.
+    pub const WIDEST: [LensModel; 2] = [LensModel::Kb4, LensModel::OpenCv8];
+
     /// The config name.
     pub fn name(self) -> &'static str {
         self.info().name
