@@ -70,14 +70,13 @@ pub fn projection_jacobian(k: &Intrinsics, ray: &Vector3<f64>) -> Option<DMatrix
 /// the grids below take one per pixel, thousands per calibration.
 fn jacobian_rows(k: &Intrinsics, ray: &Vector3<f64>) -> Option<[[f64; MAX_PARAMS]; 2]> {
     let mut j = [[0.0; MAX_PARAMS]; 2];
-    for i in 0..k.params().len() {
-        let h = PARAM_STEP * k.params()[i].abs().max(1.0);
+    for (i, p) in k.params().iter().enumerate() {
+        let h = PARAM_STEP * p.abs().max(1.0);
         let (mut plus, mut minus) = (*k, *k);
         plus.params_mut()[i] += h;
         minus.params_mut()[i] -= h;
         let d = (plus.project(ray)? - minus.project(ray)?) / (2.0 * h);
-        j[0][i] = d.x;
-        j[1][i] = d.y;
+        [j[0][i], j[1][i]] = [d.x, d.y];
     }
     Some(j)
 }

@@ -108,14 +108,12 @@ impl Setup {
             settings: self.settings.clone(),
             gauge: None,
         };
-        fit(ref_data, &request)
-            .map(Some)
-            .map_err(|e| match e {
-                Error::Degenerate(m) | Error::Init(m) | Error::Solver(m) => {
-                    Error::Degenerate(format!("the reference calibration failed: {m}"))
-                }
-                other => other,
-            })
+        fit(ref_data, &request).map(Some).map_err(|e| match e {
+            Error::Degenerate(m) | Error::Init(m) | Error::Solver(m) => {
+                Error::Degenerate(format!("the reference calibration failed: {m}"))
+            }
+            other => other,
+        })
     }
 
     /// The reference calibration and what the rows are measured against with it.
