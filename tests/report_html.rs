@@ -342,7 +342,7 @@ fn report_embeds_the_uncertainty_map_and_names_the_images() {
     let html = std::fs::read_to_string(dir.path().join("report.html")).unwrap();
     let uri = format!(
         "data:image/svg+xml;base64,{}",
-        html_report::page::base64(svg)
+        deformcal::app::raster::base64(svg)
     );
     assert!(html.contains(&uri), "the map is not embedded");
     assert!(!html.contains("No projection-uncertainty map"));

@@ -76,8 +76,7 @@ fn jacobian_rows(k: &Intrinsics, ray: &Vector3<f64>) -> Option<[[f64; MAX_PARAMS
         plus.params_mut()[i] += h;
         minus.params_mut()[i] -= h;
         let d = (plus.project(ray)? - minus.project(ray)?) / (2.0 * h);
-        j[0][i] = d.x;
-        j[1][i] = d.y;
+        [j[0][i], j[1][i]] = [d.x, d.y];
     }
     Some(j)
 }

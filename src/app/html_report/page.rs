@@ -2,6 +2,7 @@
 //! style sheet and table of contents, sections, tables and figures. A page built
 //! here is self-contained by construction: it refers to no network resource,
 //! script or font file, so it opens the same offline, in a mail or an archive.
+use crate::app::raster::base64;
 use std::fmt::Write;
 
 /// `s` with the five characters HTML gives a meaning escaped.
@@ -126,28 +127,6 @@ pub fn svg_image_html(svg: &[u8], alt: &str) -> String {
     )
 }
 
-/// Standard base64 (RFC 4648) with padding.
-pub fn base64(bytes: &[u8]) -> String {
-    const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut out = String::with_capacity(bytes.len().div_ceil(3) * 4);
-    for chunk in bytes.chunks(3) {
-        let b = [
-            chunk[0],
-            *chunk.get(1).unwrap_or(&0),
-            *chunk.get(2).unwrap_or(&0),
-        ];
-        let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
-        for k in 0..4 {
-            if k <= chunk.len() {
-                out.push(ALPHABET[((n >> (18 - 6 * k)) & 63) as usize] as char);
-            } else {
-                out.push('=');
-            }
-        }
-    }
-    out
-}
-
 /// A report page: a title, a lead paragraph and top-level sections, listed in a
 /// table of contents.
 #[derive(Debug, Clone, Default)]
@@ -247,22 +226,6 @@ summary{cursor:pointer;color:#1f4e9c}
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn base64_matches_rfc_4648_vectors() {
-        // RFC 4648 §10.
-        for (plain, coded) in [
-            ("", ""),
-            ("f", "Zg=="),
-            ("fo", "Zm8="),
-            ("foo", "Zm9v"),
-            ("foob", "Zm9vYg=="),
-            ("fooba", "Zm9vYmE="),
-            ("foobar", "Zm9vYmFy"),
-        ] {
-            assert_eq!(base64(plain.as_bytes()), coded);
-        }
-    }
 
     #[test]
     fn text_is_escaped_and_code_spans_kept() {
