@@ -18,7 +18,11 @@
 //! `-- growth N...` instead times one `standard` and one `full` calibration of N
 //! images each (time per image, for the README's cost-growth table); run one
 //! size per process under `/usr/bin/time -v` for its peak memory. Method names
-//! among the arguments (`-- growth 10000 standard`) time only those.
+//! among the arguments (`-- growth 10000 standard`) time only those. A result
+//! that rejected observations is checked against the previous pipeline's
+//! answer, the kept observations fitted afresh (within 0.01 px, the run fails
+//! otherwise); `SPEED_DIAG=1` lists each result's stages, `SPEED_VERBOSE=1`
+//! prints Ceres' iterations and its timing report.
 use deformcal::model::metrics::mapping_error;
 use deformcal::model::synthetic::{Generator, Preset};
 use deformcal::solver::problem::SolverSettings;
@@ -62,6 +66,8 @@ fn request(method: Method, per_corner_blocks: bool) -> Request {
         method,
         settings: SolverSettings {
             per_corner_blocks,
+            // Ceres' per-iteration lines and its timing report on stderr.
+            verbose: std::env::var("SPEED_VERBOSE").is_ok(),
             ..SolverSettings::default()
         },
         gauge: None,
@@ -170,8 +176,10 @@ fn compare_paths(model: LensModel) -> bool {
     ok
 }
 
-/// One calibration per size and method, time per image.
-fn growth(sizes: &[usize], methods: &[Method]) {
+/// One calibration per size and method, time per image; false if a result
+/// with rejected observations is not the fit of the kept ones afresh.
+fn growth(sizes: &[usize], methods: &[Method]) -> bool {
+    let mut ok = true;
     println!("cost growth: t2 preset, radial3, 1 thread, whole calibration without covariance");
     for &n in sizes {
         let (dataset, _) = Generator::new(Preset::T2, Some(n), 7).generate();
@@ -190,8 +198,47 @@ fn growth(sizes: &[usize], methods: &[Method]) {
                 c.iterations(),
                 c.stages.last().map_or("", |s| s.linear_solver.as_str())
             );
+            if std::env::var("SPEED_DIAG").is_ok() {
+                for s in &c.stages {
+                    println!(
+                        "    stage {:8} {:3} iterations {:9.1} ms {}",
+                        s.method.name(),
+                        s.iterations,
+                        s.seconds * 1e3,
+                        s.linear_solver
+                    );
+                }
+            }
+            if !c.rejected.is_empty() {
+                // Only what the check needs is kept (peak memory).
+                let (kept_data, intrinsics, rejected) =
+                    (c.dataset, c.state.intrinsics[0], c.rejected.len());
+                // The previous pipeline's answer: the kept observations fitted
+                // afresh (what `without_footprint` did for any rejection).
+                let mut kept = request(method, false);
+                kept.settings.outlier_k = 0.0;
+                let fresh = deformcal::solver::calibrate::fit(&kept_data, &kept).expect("fit");
+                let cam = &dataset.cameras[0];
+                let e = mapping_error(
+                    &fresh.state.intrinsics[0],
+                    &intrinsics,
+                    cam.width,
+                    cam.height,
+                );
+                println!(
+                    "    {} rejected; {e:.5} px from the kept observations fitted afresh{}",
+                    rejected,
+                    if e <= SAME_ANSWER_PX {
+                        ""
+                    } else {
+                        "  NOT THE SAME ANSWER"
+                    }
+                );
+                ok &= e <= SAME_ANSWER_PX;
+            }
         }
     }
+    ok
 }
 
 fn main() {
@@ -205,14 +252,15 @@ fn main() {
         if methods.is_empty() {
             methods = vec![Method::Standard, Method::Full];
         }
-        growth(
-            if sizes.is_empty() {
-                &[25, 100, 400, 1600]
-            } else {
-                &sizes
-            },
-            &methods,
-        );
+        let sizes: &[usize] = if sizes.is_empty() {
+            &[25, 100, 400, 1600]
+        } else {
+            &sizes
+        };
+        if !growth(sizes, &methods) {
+            eprintln!("a result is more than {SAME_ANSWER_PX} px from the previous answer");
+            std::process::exit(1);
+        }
         return;
     }
     let mut ok = true;

@@ -33,6 +33,10 @@ pub enum Error {
     /// few usable images. Names the pattern.
     #[error("photos `{pattern}`: {message}")]
     Photos { pattern: String, message: String },
+    /// A video that cannot be decoded (no `ffmpeg`, not a video, no board in
+    /// enough frames). Names the file.
+    #[error("video {path}: {message}")]
+    Video { path: PathBuf, message: String },
     /// The C++ core refused the problem it was given (sizes, values, layout): a
     /// bug in the caller, or input that should have been refused earlier.
     #[error("invalid problem: {0}")]

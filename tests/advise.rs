@@ -197,3 +197,45 @@ fn advised_pose_fills_the_empty_corner_and_helps_as_predicted() {
         "drop {sim_drop} simulated, {pred_drop} predicted"
     );
 }
+
+/// The report's section takes the calibration's own covariance (no new solve):
+/// its advice agrees with advice from the views' information summed anew, and
+/// the section shows the picture and the three predicted errors.
+#[test]
+fn the_report_section_reuses_the_covariance_and_agrees() {
+    let truth = true_intrinsics();
+    let c = calibrated(&dataset(&truth, &capture_poses(&truth), 1));
+    let mut summed = knowledge(&c);
+    let from_cov = advise::knowledge_of(&c, 0).expect("a covariance and a noise estimate");
+    // Same noise on both sides: the calibration's estimate.
+    summed.noise_px = from_cov.noise_px;
+    let a = advise::advise(&from_cov, 3).unwrap();
+    let b = advise::advise(&summed, 3).unwrap();
+    assert!(
+        (a.current_error_px / b.current_error_px - 1.0).abs() < 0.05,
+        "{} vs {}",
+        a.current_error_px,
+        b.current_error_px
+    );
+    let reported = c.assessment.uncertainty.as_ref().unwrap()[0].expected_mapping_error_px;
+    assert!(
+        (a.current_error_px / reported - 1.0).abs() < 1e-6,
+        "{} vs {reported}",
+        a.current_error_px
+    );
+    assert_eq!(a.poses[0].camera_from_board, b.poses[0].camera_from_board);
+    for (p, q) in a.poses.iter().zip(&b.poses) {
+        assert!(
+            (p.predicted_error_px / q.predicted_error_px - 1.0).abs() < 0.05,
+            "{p:?} vs {q:?}"
+        );
+    }
+    let html = deformcal::app::html_report::advice::advice_section(&c);
+    assert!(html.contains("data:image/svg+xml;base64,"), "the picture");
+    for p in &a.poses {
+        assert!(
+            html.contains(&format!("{:.3}", p.predicted_error_px)),
+            "{html}"
+        );
+    }
+}

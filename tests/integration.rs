@@ -43,6 +43,7 @@ mod sfm;
 mod slurm;
 mod trust;
 mod uncertainty;
+mod video;
 
 /// A test file missing above would compile nowhere and run never (`autotests = false`).
 #[test]

@@ -491,29 +491,13 @@ fn edges_on_cycles(edges: &BTreeMap<String, BTreeSet<String>>) -> Vec<String> {
     out
 }
 
-/// Folders whose files import each other in a cycle today (a `mod.rs` that uses
-/// its children and children that use its items) and that other changes under way
-/// are rewriting: the detector. A cycle
-/// within one of them is listed, not failed, until those changes land; this list
-/// then shrinks to empty.
-const CYCLES_UNDER_CHANGE: [&str; 1] = ["app/detect/"];
-
 #[test]
 fn no_import_cycles_between_files() {
     let edges = file_graph();
     let on_cycles = edges_on_cycles(&edges);
-    let within = |e: &String| {
-        CYCLES_UNDER_CHANGE
-            .iter()
-            .any(|dir| e.split(" -> ").all(|f| f.starts_with(dir)))
-    };
-    let (waiting, wrong): (Vec<String>, Vec<String>) = on_cycles.into_iter().partition(within);
-    if !waiting.is_empty() {
-        eprintln!("cycles in folders under change: {waiting:#?}");
-    }
     assert!(
-        wrong.is_empty(),
-        "imports on a cycle between files (move what both need into a file of its own): {wrong:#?}"
+        on_cycles.is_empty(),
+        "imports on a cycle between files (move what both need into a file of its own): {on_cycles:#?}"
     );
 }
 

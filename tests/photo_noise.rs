@@ -8,7 +8,7 @@ use crate::detect_common;
 use common::run;
 use deformcal::app::detect::detect_image;
 use deformcal::app::detect::render::render_board;
-use deformcal::app::photos::corner_weight;
+use deformcal::model::dataset::DetectedCorner;
 use deformcal::solver::problem::Loss;
 use deformcal::Method;
 use deformcal::{CameraSpec, Dataset, LensModel, Target};
@@ -35,8 +35,7 @@ const VIEWS: [([f64; 3], f64, [f64; 2], f64); 12] = [
 /// error (the σ that a weight-1 corner has).
 fn photos(noise: f64, blur: f64) -> (Dataset, f64) {
     let (rows, cols) = (6, 9);
-    let mut keyed = Vec::new();
-    let mut weights = Vec::new();
+    let mut corners = Vec::new();
     let (mut sq, mut n) = (0.0, 0.0);
     for (k, (rvec, dist, shift, bend)) in VIEWS.into_iter().enumerate() {
         let mut sc = scene(rows, cols, rvec, dist, shift);
@@ -50,11 +49,16 @@ fn photos(noise: f64, blur: f64) -> (Dataset, f64) {
             .unwrap_or_else(|e| panic!("view {k}: {e:?}"));
         for c in &det.corners {
             let t = truth[c.index].expect("a detected corner is in view");
-            let w = corner_weight(c.sigma);
+            let w = c.weight;
             sq += w * w * ((c.uv[0] - t[0]).powi(2) + (c.uv[1] - t[1]).powi(2));
             n += 2.0;
-            keyed.push((0, k as i64, c.index, c.uv));
-            weights.push(w);
+            corners.push(DetectedCorner {
+                camera: 0,
+                frame_id: k as i64,
+                corner: c.index,
+                uv: c.uv,
+                weight: w,
+            });
         }
     }
     let target = Target {
@@ -63,10 +67,7 @@ fn photos(noise: f64, blur: f64) -> (Dataset, f64) {
         spacing: 0.03,
     };
     let camera = CameraSpec::new("cam0", W, H, LensModel::Radial3);
-    let mut d = Dataset::from_keyed(target, vec![camera], keyed);
-    for (o, w) in d.observations.iter_mut().zip(weights) {
-        o.weight = w;
-    }
+    let d = Dataset::from_detected(target, vec![camera], corners);
     (d, (sq / n).sqrt())
 }
 

@@ -5,6 +5,8 @@
 use crate::detect_common;
 
 use deformcal::app::detect::render::render_board;
+use deformcal::app::detect::Detector;
+use deformcal::app::photos::{cache, detect_photos, PhotoRun};
 use detect_common::*;
 use image::{DynamicImage, ImageBuffer, Luma};
 use std::path::Path;
@@ -130,6 +132,119 @@ fn photos_to_intrinsics_with_cache_and_report() {
     let third = deformcal(&["--config", config.to_str().unwrap()]);
     let stderr = String::from_utf8_lossy(&third.stderr);
     assert!(stderr.contains("10 reused from the cache"), "{stderr}");
+}
+
+/// What `detect_photos` made of the photos of the config in `dir`.
+fn photo_run(dir: &Path) -> PhotoRun {
+    let config = dir.join("c.toml");
+    let c = deformcal::Config::load(&config).unwrap();
+    detect_photos(
+        &c.data,
+        c.target,
+        c.charuco.as_ref(),
+        &c.cameras,
+        &c.output_dir,
+        false,
+    )
+    .unwrap()
+}
+
+/// A rerun from the cache hands the calibration exactly the observations of a
+/// fresh detection, weights included, and those are the detector's own corners
+/// (nothing on the way changes an id, a pixel or a weight); a cache file of the
+/// older format (a corner as four floats) or a broken one is detected afresh.
+#[test]
+fn the_cache_keeps_each_corner_as_the_detector_gave_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let photos = dir.path().join("photos");
+    std::fs::create_dir_all(&photos).unwrap();
+    for (k, (rvec, dist, shift, _)) in views().into_iter().take(4).enumerate() {
+        let mut sc = scene(6, 9, rvec, dist, shift);
+        // Noise so that corners' σ, and so their weights, differ.
+        sc.noise = 12.0;
+        sc.seed = 7 + k as u64;
+        let (img, _) = render_board(&sc);
+        img.save(photos.join(format!("img-{k:02}.png"))).unwrap();
+    }
+    std::fs::write(
+        dir.path().join("c.toml"),
+        format!(
+            "{BOARD}[[cameras]]\nname = \"cam0\"\nwidth = {W}\nheight = {H}\nmodel = \"radial3\"\n\
+             [data]\nphotos = \"photos/img-*.png\"\n[output]\ndir = \"out\"\n"
+        ),
+    )
+    .unwrap();
+    let fresh = photo_run(dir.path());
+    assert!(fresh.images.iter().all(|r| !r.cached));
+    assert_eq!(fresh.images.len(), 4);
+    // Each image's observations are its detection's corners, field by field.
+    for r in &fresh.images {
+        let det = Detector::default()
+            .detect_file(&dir.path().join(&r.file.name), 6, 9)
+            .unwrap();
+        let frame = fresh
+            .dataset
+            .frame_ids
+            .iter()
+            .position(|&f| f == r.file.frame);
+        let seen: Vec<(usize, [f64; 2], f64)> = fresh
+            .dataset
+            .observations
+            .iter()
+            .filter(|o| Some(o.frame) == frame)
+            .map(|o| (o.corner, o.uv, o.weight))
+            .collect();
+        let detected: Vec<(usize, [f64; 2], f64)> = det
+            .corners
+            .iter()
+            .map(|c| (c.index, c.uv, c.weight))
+            .collect();
+        assert_eq!(seen, detected, "{}", r.file.name);
+    }
+    let weights: Vec<f64> = fresh
+        .dataset
+        .observations
+        .iter()
+        .map(|o| o.weight)
+        .collect();
+    let (lo, hi) = weights
+        .iter()
+        .fold((1.0f64, 0.0f64), |(lo, hi), &w| (lo.min(w), hi.max(w)));
+    assert!(
+        lo < 0.9 && hi - lo > 0.1,
+        "weights should vary: {weights:?}"
+    );
+    let out = dir.path().join("out");
+    let csv = || std::fs::read(out.join("observations.csv")).unwrap();
+    let fresh_csv = csv();
+
+    let cached = photo_run(dir.path());
+    assert!(cached.images.iter().all(|r| r.cached));
+    assert_eq!(cached.dataset, fresh.dataset);
+    assert_eq!(csv(), fresh_csv);
+
+    // The older format: no version, each corner as [id, u, v, σ].
+    let file = out.join(cache::FILE_NAME);
+    let mut old: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&file).unwrap()).unwrap();
+    old.as_object_mut().unwrap().remove("version");
+    for entry in old["images"].as_object_mut().unwrap().values_mut() {
+        let corners = entry["outcome"]["corners"].as_array_mut().unwrap();
+        for c in corners.iter_mut() {
+            *c = serde_json::json!([c["index"], c["uv"][0], c["uv"][1], c["sigma"]]);
+        }
+    }
+    std::fs::write(&file, serde_json::to_vec(&old).unwrap()).unwrap();
+    let after_old = photo_run(dir.path());
+    assert!(after_old.images.iter().all(|r| !r.cached));
+    assert_eq!(after_old.dataset, fresh.dataset);
+    assert!(photo_run(dir.path()).images.iter().all(|r| r.cached));
+
+    std::fs::write(&file, b"{\"version\": 2, \"settings\": ").unwrap();
+    let after_broken = photo_run(dir.path());
+    assert!(after_broken.images.iter().all(|r| !r.cached));
+    assert_eq!(after_broken.dataset, fresh.dataset);
+    assert_eq!(csv(), fresh_csv);
 }
 
 #[test]

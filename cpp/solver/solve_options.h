@@ -27,8 +27,12 @@ namespace {
 // At 400 and 1600 t2 images (`cargo bench --bench speed -- growth`, `full`,
 // poses eliminated, a 341-wide reduced system) dense Schur took 0.97 s and
 // 3.5 s, iterative Schur 1.4 s and 7.8 s (more iterations again), sparse Schur
-// 4.1 s at 1600; for `standard` at 1600 dense 0.74 s, iterative 0.80 s.  So
-// dense stays up to 1200 reduced parameters and iterative Schur is not used.
+// 4.1 s at 1600; for `standard` at 1600 dense 0.74 s, iterative 0.80 s.  Again
+// on 2026-12-05 at 400 `full` images: dense 0.92 s, iterative with eta 0.1,
+// 0.01 and 0.001 1.33, 1.21 and 1.16 s (the explicit update costs each image
+// the same as the products of the conjugate gradients, so no size changes
+// this).  So dense stays up to 1200 reduced parameters and iterative Schur is
+// not used.
 void ChooseLinearSolver(const Assembled& a, ceres::Solver::Options& s) {
   ceres::Problem& problem = *a.problem;
   std::vector<double*> all;

@@ -35,7 +35,9 @@ pub(crate) fn class_of(e: &deformcal::Error) -> &'static str {
         E::Data { .. } | E::Invalid(_) | E::TooLarge(_) => "InputError",
         E::Degenerate(_) | E::Init(_) => "DataError",
         E::Solver(_) | E::Problem(_) => "SolverError",
-        E::Io { .. } | E::Write { .. } | E::Locked(_) | E::Photos { .. } => "FileError",
+        E::Io { .. } | E::Write { .. } | E::Locked(_) | E::Photos { .. } | E::Video { .. } => {
+            "FileError"
+        }
     }
 }
 

@@ -449,6 +449,34 @@ pub fn svg(kn: &Knowledge, advice: &Advice) -> String {
             );
         }
     }
+    board_outlines(&mut s, advice, w, h);
+    let _ = writeln!(
+        s,
+        "<rect x=\"0\" y=\"{h}\" width=\"{w}\" height=\"{legend}\" fill=\"#ffffff\"/>"
+    );
+    // Two lines, smaller than the labels: one line overflows a 640 px image.
+    let caption = (h / 36.0).round();
+    let lines = [
+        format!(
+            "projection σ {lo:.3} px (grey) to {hi:.3} px (red); expected mapping error now {:.3} px",
+            advice.current_error_px
+        ),
+        "outlines: the next boards to add, each with the expected error after adding it".to_string(),
+    ];
+    for (i, line) in lines.iter().enumerate() {
+        let _ = writeln!(
+            s,
+            "<text x=\"{:.1}\" y=\"{:.1}\" font-family=\"sans-serif\" font-size=\"{caption}\">{line}</text>",
+            0.01 * w,
+            h + (0.4 + 0.35 * i as f64) * legend,
+        );
+    }
+    s.push_str("</svg>\n");
+    s
+}
+
+/// The advised boards' outlines, numbered, with each one's predicted error.
+fn board_outlines(s: &mut String, advice: &Advice, w: f64, h: f64) {
     let font = (h / 28.0).round();
     let colours = ["#1f5fd6", "#118a3a", "#7a2bbf"];
     for (i, p) in advice.poses.iter().enumerate() {
@@ -476,29 +504,6 @@ pub fn svg(kn: &Knowledge, advice: &Advice) -> String {
             p.predicted_error_px
         );
     }
-    let _ = writeln!(
-        s,
-        "<rect x=\"0\" y=\"{h}\" width=\"{w}\" height=\"{legend}\" fill=\"#ffffff\"/>"
-    );
-    // Two lines, smaller than the labels: one line overflows a 640 px image.
-    let caption = (h / 36.0).round();
-    let lines = [
-        format!(
-            "projection σ {lo:.3} px (grey) to {hi:.3} px (red); expected mapping error now {:.3} px",
-            advice.current_error_px
-        ),
-        "outlines: the next boards to add, each with the expected error after adding it".to_string(),
-    ];
-    for (i, line) in lines.iter().enumerate() {
-        let _ = writeln!(
-            s,
-            "<text x=\"{:.1}\" y=\"{:.1}\" font-family=\"sans-serif\" font-size=\"{caption}\">{line}</text>",
-            0.01 * w,
-            h + (0.4 + 0.35 * i as f64) * legend,
-        );
-    }
-    s.push_str("</svg>\n");
-    s
 }
 
 /// Grey (0) to red (1).
@@ -508,4 +513,26 @@ fn colour(t: f64) -> String {
     let g = (200.0 * (1.0 - t) + 40.0 * t) as u8;
     let b = (200.0 * (1.0 - t) + 40.0 * t) as u8;
     format!("#{r:02x}{g:02x}{b:02x}")
+}
+
+/// What camera `k` of a finished calibration knows, from the covariance the
+/// pipeline already computed (its inverse is the information so far, at unit
+/// noise; nothing is solved again) and its noise estimate; `None` when the
+/// calibration has no covariance or no noise estimate.
+pub fn knowledge_of(c: &crate::solver::calibrate::Calibration, k: usize) -> Option<Knowledge> {
+    let cov = c.covariance.as_ref().ok()?.get(k)?;
+    let noise_px = c.assessment.trust.as_ref()?.noise_px;
+    let idx = free_indices(&cov.free);
+    let block = DMatrix::from_fn(idx.len(), idx.len(), |a, b| cov.unit[(idx[a], idx[b])]);
+    let information = block.cholesky()?.inverse();
+    let cam = c.dataset.cameras.get(k)?;
+    Some(Knowledge {
+        intrinsics: *c.state.intrinsics.get(k)?,
+        width: cam.width,
+        height: cam.height,
+        free: cov.free.clone(),
+        target: c.dataset.target,
+        noise_px,
+        information,
+    })
 }

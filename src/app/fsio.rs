@@ -50,18 +50,75 @@ pub fn read_limited(path: &Path, limit: u64) -> Result<Vec<u8>> {
 }
 
 /// Writes `bytes` to `path` through a temporary file and a rename, so a reader
-/// (or a crash) never sees a half-written file.
+/// (or a crash) never sees a half-written file. Into the staging directory of an
+/// [`OutputSet`], which no reader sees before its commit, the file is written in
+/// place and synced with the rest of the set at the commit.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     let dir = path
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
+    if let Some(files) = staged().iter_mut().find(|(d, _)| d == dir) {
+        return write_staged(path, bytes, &mut files.1);
+    }
     let tmp = tempfile::NamedTempFile::new_in(dir).map_err(|e| Error::write(dir, e))?;
     let tmp_path = tmp.path().to_path_buf();
     track(&tmp_path);
     let written = write_temp(tmp, path, bytes);
     untrack(&tmp_path);
     written
+}
+
+/// The staging directories of the live output sets, each with the files written
+/// into it so far (open, to be synced at the commit).
+static STAGED: std::sync::Mutex<Vec<(PathBuf, Vec<std::fs::File>)>> =
+    std::sync::Mutex::new(Vec::new());
+
+fn staged() -> std::sync::MutexGuard<'static, Vec<(PathBuf, Vec<std::fs::File>)>> {
+    STAGED.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// [`write_atomic`] into a staging directory: the file itself, no temporary file,
+/// no sync yet (see [`OutputSet::commit`]).
+fn write_staged(path: &Path, bytes: &[u8], files: &mut Vec<std::fs::File>) -> Result<()> {
+    let mut options = std::fs::OpenOptions::new();
+    options.write(true).create(true).truncate(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        options.mode(0o644);
+    }
+    let mut file = options.open(path).map_err(|e| Error::write(path, e))?;
+    file.write_all(bytes).map_err(|e| Error::write(path, e))?;
+    files.push(file);
+    Ok(())
+}
+
+/// Most threads [`sync_files`] syncs with.
+const SYNC_THREADS: usize = 8;
+
+/// Flushes the files' data to the disk side by side: concurrent syncs share the
+/// file system's journal commits, one after the other each waits for its own.
+fn sync_files(files: &[std::fs::File]) -> std::io::Result<()> {
+    let per_thread = files.len().div_ceil(SYNC_THREADS).max(1);
+    std::thread::scope(|s| {
+        let handles: Vec<_> = files
+            .chunks(per_thread)
+            .map(|chunk| {
+                let sync = move || chunk.iter().try_for_each(std::fs::File::sync_data);
+                std::thread::Builder::new()
+                    .spawn_scoped(s, sync)
+                    .map_err(|_| sync)
+            })
+            .collect();
+        handles.into_iter().try_for_each(|h| match h {
+            Ok(h) => h
+                .join()
+                .unwrap_or_else(|_| Err(std::io::Error::other("sync panicked"))),
+            // Without a thread to be had, the chunk is synced here.
+            Err(sync) => sync(),
+        })
+    })
 }
 
 /// [`write_atomic`]'s part after the temporary file is created.
@@ -375,6 +432,7 @@ impl OutputSet {
             .map_err(|e| Error::write(&parent, e))?;
         unfinished.push(staging.path().to_path_buf());
         drop(unfinished);
+        staged().push((staging.path().to_path_buf(), Vec::new()));
         Ok(OutputSet {
             target,
             new_mode,
@@ -403,6 +461,13 @@ impl OutputSet {
     pub fn commit(mut self) -> Result<()> {
         let staging = self.staging.take().expect("staging until commit");
         let new = staging.path().to_path_buf();
+        // The set's files reach the disk before the swap makes them the output.
+        let written = forget_staged(&new);
+        if let Err(e) = sync_files(&written) {
+            untrack(&new);
+            return Err(Error::write(&new, e));
+        }
+        drop(written);
         let target = self.target.clone();
         let mut dirs = Vec::new();
         let mut mode = self.new_mode;
@@ -525,11 +590,21 @@ fn remove_tree(dir: &Path) {
     }
 }
 
+/// Takes staging directory `dir` off [`STAGED`], with the files written into it.
+fn forget_staged(dir: &Path) -> Vec<std::fs::File> {
+    let mut staged = staged();
+    match staged.iter().position(|(d, _)| d == dir) {
+        Some(i) => staged.swap_remove(i).1,
+        None => Vec::new(),
+    }
+}
+
 impl Drop for OutputSet {
     fn drop(&mut self) {
         // An uncommitted staging directory is removed by TempDir's own drop.
         if let Some(staging) = self.staging.take() {
             let path = staging.path().to_path_buf();
+            forget_staged(&path);
             drop(staging);
             untrack(&path);
         }

@@ -1,4 +1,4 @@
-//! The application layer: config, data files, photos and board detection, exports, the evaluation protocol,
+//! The application layer: config, data files, photos, video and board detection, exports, the evaluation protocol,
 //! reports and plots, and the C API. Builds on the model and solver layers.
 pub mod advise;
 pub mod board_json;
@@ -22,6 +22,7 @@ pub mod photos;
 pub mod plots;
 pub mod protocol;
 pub mod protocol_report;
+pub mod raster;
 pub mod report;
 pub mod sfm;
 pub mod sfm_report;
@@ -30,3 +31,4 @@ pub mod target_config;
 pub mod target_print;
 pub mod text;
 pub mod uncertainty_plot;
+pub mod video;

@@ -1,4 +1,4 @@
-//! Where a dataset comes from: an observations CSV, mrgingham's corners.vnl, photos
+//! Where a dataset comes from: an observations CSV, mrgingham's corners.vnl, photos, a video
 //! or a built-in synthetic preset; and writing a generated preset to disk.
 use crate::app::config::{Config, DataSource};
 use crate::app::fsio::write_atomic;
@@ -54,6 +54,26 @@ pub fn load(config: &Config) -> Result<Loaded> {
             labelled_by_symmetry = run.labelled_by_symmetry();
             (run.dataset, None, listed, Some(NameSource::Photos))
         }
+        DataSource::Video(source) => {
+            let run = crate::app::video::detect_video(
+                source,
+                config.target,
+                config.charuco.as_ref(),
+                &config.cameras[0],
+                &config.output_dir,
+                true,
+            )?;
+            for line in crate::app::video::summary(&run) {
+                eprintln!("{line}");
+            }
+            let listed: Vec<(usize, i64, String)> = run
+                .frames
+                .iter()
+                .filter(|f| f.verdict == crate::app::video::choose::Verdict::Kept)
+                .map(|f| (0, f.index as i64, run.frame_name(f)))
+                .collect();
+            (run.dataset, None, listed, None)
+        }
         DataSource::CornersVnl { path, patterns } => {
             let t = corners_vnl::read_table(path, config.target, config.cameras.clone(), patterns)?;
             (t.dataset, None, t.files, Some(NameSource::CornersVnl))
@@ -106,8 +126,9 @@ pub fn load_source(
             let (d, _) = corners_vnl::read_corners_vnl(path, target, cameras.to_vec(), patterns)?;
             Ok((d, None))
         }
-        DataSource::Photos { .. } => Err(crate::error::Error::Invalid(
-            "photos are detected through source::load_data, which knows the output dir".into(),
+        DataSource::Photos { .. } | DataSource::Video(_) => Err(crate::error::Error::Invalid(
+            "photos and videos are detected through source::load_data, which knows the output dir"
+                .into(),
         )),
         DataSource::Synthetic {
             preset,

@@ -1,10 +1,12 @@
 //! The projection-uncertainty map of each camera as an SVG heat map
 //! (`uncertainty_<camera>.svg` beside `calibration.json`): the predicted 1-σ
-//! projection error over the image, with contour lines and a colour bar. The
+//! projection error over the image (its cells one embedded PNG, `app::raster`),
+//! with contour lines and a colour bar. The
 //! numbers are `model::uncertainty`'s; this file only draws them.
 use crate::app::exports::file_stem;
 use crate::app::fsio::{write_atomic, UNCERTAINTY_MAP_PREFIX};
 use crate::app::plots;
+use crate::app::raster;
 use crate::error::{Error, Result};
 use crate::model::uncertainty::{projection_uncertainty_map, UncertaintyMap};
 use crate::solver::calibrate::Calibration;
@@ -101,14 +103,41 @@ fn err<E: std::fmt::Debug>(e: E) -> String {
 
 /// Draws the heat map, its contours and the colour bar into `svg`.
 fn draw(svg: &mut String, title: &str, map: &UncertaintyMap) -> std::result::Result<(), String> {
+    let levels = levels(map.min(), map.max());
+    draw_vector(svg, title, map, &levels)?;
+    let (bottom, top) = (levels[0], *levels.last().unwrap_or(&1.0));
+    let colours = map
+        .sigma_px
+        .iter()
+        .map(|v| {
+            if v.is_finite() {
+                crate::app::plots::sequential((v - bottom) / (top - bottom))
+            } else {
+                RGBColor(220, 220, 220)
+            }
+        })
+        .collect();
+    let cells = raster::Cells {
+        columns: map.columns,
+        rows: map.rows,
+        colours,
+    };
+    raster::embed(svg, &cells)
+}
+
+/// [`draw`] but the cells, which are left as [`raster::placeholder`].
+fn draw_vector(
+    svg: &mut String,
+    title: &str,
+    map: &UncertaintyMap,
+    levels: &[f64],
+) -> std::result::Result<(), String> {
     let (w, h) = (map.width as f64, map.height as f64);
     let plot_w = 760u32;
     let plot_h = ((plot_w - 90) as f64 * h / w.max(1.0) + 90.0).clamp(240.0, 1200.0) as u32;
     let root = SVGBackend::with_string(svg, (plot_w + 130, plot_h)).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
     let (plot, legend) = root.split_horizontally(plot_w);
-    let levels = levels(map.min(), map.max());
-    let (bottom, top) = (levels[0], *levels.last().unwrap_or(&1.0));
     let mut chart = ChartBuilder::on(&plot)
         .caption(title, ("sans-serif", 15))
         .margin(10)
@@ -125,20 +154,7 @@ fn draw(svg: &mut String, title: &str, map: &UncertaintyMap) -> std::result::Res
         .y_label_formatter(&|y| format!("{y:.0}"))
         .draw()
         .map_err(err)?;
-    let (cw, ch) = (w / map.columns as f64, h / map.rows as f64);
-    let cells = (0..map.rows).flat_map(|r| (0..map.columns).map(move |c| (c, r)));
-    chart
-        .draw_series(cells.map(|(c, r)| {
-            let v = map.sigma_px[r * map.columns + c];
-            let (x0, y0) = (c as f64 * cw - 0.5, r as f64 * ch - 0.5);
-            let fill = if v.is_finite() {
-                crate::app::plots::sequential((v - bottom) / (top - bottom))
-            } else {
-                RGBColor(220, 220, 220)
-            };
-            Rectangle::new([(x0, y0), (x0 + cw, y0 + ch)], fill.filled())
-        }))
-        .map_err(err)?;
+    raster::placeholder(&mut chart, (-0.5, -0.5), (w - 0.5, h - 0.5))?;
     for &level in &levels[1..levels.len().saturating_sub(1).max(1)] {
         chart
             .draw_series(
@@ -148,7 +164,7 @@ fn draw(svg: &mut String, title: &str, map: &UncertaintyMap) -> std::result::Res
             )
             .map_err(err)?;
     }
-    draw_bar(&legend, &levels).map_err(err)?;
+    draw_bar(&legend, levels).map_err(err)?;
     root.present().map_err(err)
 }
 

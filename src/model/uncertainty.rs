@@ -62,15 +62,22 @@ const ROTATION_STEP: f64 = 1e-6;
 /// perturbed projection fails (a ray at the edge of the model's domain).
 pub fn projection_jacobian(k: &Intrinsics, ray: &Vector3<f64>) -> Option<DMatrix<f64>> {
     let n = k.params().len();
-    let mut j = DMatrix::zeros(2, n);
-    for i in 0..n {
-        let h = PARAM_STEP * k.params()[i].abs().max(1.0);
+    let j = jacobian_rows(k, ray)?;
+    Some(DMatrix::from_fn(2, n, |r, c| j[r][c]))
+}
+
+/// [`projection_jacobian`]'s two rows on the stack (the first n entries hold it):
+/// the grids below take one per pixel, thousands per calibration.
+fn jacobian_rows(k: &Intrinsics, ray: &Vector3<f64>) -> Option<[[f64; MAX_PARAMS]; 2]> {
+    let mut j = [[0.0; MAX_PARAMS]; 2];
+    for (i, p) in k.params().iter().enumerate() {
+        let h = PARAM_STEP * p.abs().max(1.0);
         let (mut plus, mut minus) = (*k, *k);
         plus.params_mut()[i] += h;
         minus.params_mut()[i] -= h;
         let d = (plus.project(ray)? - minus.project(ray)?) / (2.0 * h);
-        j[(0, i)] = d.x;
-        j[(1, i)] = d.y;
+        j[0][i] = d.x;
+        j[1][i] = d.y;
     }
     Some(j)
 }
@@ -146,16 +153,24 @@ pub fn mapping_forms(k: &Intrinsics, width: u32, height: u32) -> Option<MappingF
 /// [`mapping_forms`] computed afresh.
 pub fn compute_mapping_forms(k: &Intrinsics, width: u32, height: u32) -> Option<MappingForms> {
     let n = k.params().len();
-    let (mut h, mut c, mut kk) = (DMatrix::zeros(n, n), DMatrix::zeros(n, 3), Matrix3::zeros());
+    let (mut h, mut c) = (DMatrix::<f64>::zeros(n, n), DMatrix::<f64>::zeros(n, 3));
+    let mut kk = Matrix3::<f64>::zeros();
     let mut m = 0;
+    // Sums of JᵀJ, JᵀR and RᵀR over the grid, accumulated in place: no matrix is
+    // allocated per pixel.
     for (_, ray) in grid_rays(k, width, height) {
-        let (Some(j), Some(r)) = (projection_jacobian(k, &ray), rotation_jacobian(k, &ray)) else {
+        let (Some(j), Some(r)) = (jacobian_rows(k, &ray), rotation_jacobian(k, &ray)) else {
             continue;
         };
-        let r = DMatrix::from_column_slice(2, 3, r.as_slice());
-        h += j.transpose() * &j;
-        c += j.transpose() * &r;
-        kk += Matrix3::from_column_slice((r.transpose() * &r).as_slice());
+        for a in 0..n {
+            for b in 0..n {
+                h[(a, b)] += j[0][a] * j[0][b] + j[1][a] * j[1][b];
+            }
+            for b in 0..3 {
+                c[(a, b)] += j[0][a] * r[(0, b)] + j[1][a] * r[(1, b)];
+            }
+        }
+        kk += r.transpose() * r;
         m += 1;
     }
     let kk_inv = kk.try_inverse()?;
@@ -240,6 +255,22 @@ impl UncertaintyMap {
     }
 }
 
+/// J Σ Jᵀ (2 × 2) for the rows of [`jacobian_rows`] and an n × n Σ.
+fn propagate(j: &[[f64; MAX_PARAMS]; 2], sigma: &DMatrix<f64>) -> Matrix2<f64> {
+    let n = sigma.nrows();
+    let mut s = Matrix2::zeros();
+    for a in 0..n {
+        for b in 0..n {
+            let v = sigma[(a, b)];
+            s[(0, 0)] += j[0][a] * v * j[0][b];
+            s[(0, 1)] += j[0][a] * v * j[1][b];
+            s[(1, 1)] += j[1][a] * v * j[1][b];
+        }
+    }
+    s[(1, 0)] = s[(0, 1)];
+    s
+}
+
 /// The projection-uncertainty map of intrinsics `k` with noise-scaled covariance
 /// `sigma`, on about `columns` cells across (square cells).
 ///
@@ -269,10 +300,9 @@ pub fn projection_uncertainty_map(
             let px = map.centre(c, r);
             let value = k
                 .unproject(&px)
-                .and_then(|ray| projection_jacobian(k, &ray))
+                .and_then(|ray| jacobian_rows(k, &ray))
                 .map(|j| {
-                    let s = &j * sigma * j.transpose();
-                    let s = Matrix2::new(s[(0, 0)], s[(0, 1)], s[(1, 0)], s[(1, 1)]);
+                    let s = propagate(&j, sigma);
                     s.symmetric_eigenvalues().max().max(0.0).sqrt()
                 })
                 .unwrap_or(f64::NAN);

@@ -182,13 +182,13 @@ fn without_corrections(config: &Config, by_symmetry: usize) -> Result<(Config, O
         return Ok((config, None));
     }
     let why = format!(
-        "{by_symmetry} views show a board that looks alike turned by 180 degrees ({} x {} inner          corners), so their corner ids follow the photo's orientation, not the printed board",
+        "{by_symmetry} views show a board that looks alike turned by 180 degrees ({} x {} inner corners), so their corner ids follow the photo's orientation, not the printed board",
         config.target.rows, config.target.cols
     );
     let c = &mut config.calibration;
     match c.method {
         MethodChoice::Fixed(m) if m.has_correction() => anyhow::bail!(
-            "method `{m}` estimates a correction per corner of the board, but {why}; use a              method without one (standard, dynamic) or a board with rows + cols odd (e.g. 9 x 6)"
+            "method `{m}` estimates a correction per corner of the board, but {why}; use a method without one (standard, dynamic) or a board with rows + cols odd (e.g. 9 x 6)"
         ),
         MethodChoice::Auto if c.auto_candidates.iter().any(|m| m.has_correction()) => {
             let left: Vec<String> = c
@@ -222,7 +222,16 @@ pub fn run_method(config: &Config, dataset: &Dataset) -> Result<Calibration> {
     let c = &config.calibration;
     let request = |method| request_of(config, method);
     match c.method {
-        MethodChoice::Fixed(m) => Ok(calibrate(dataset, &request(m))?),
+        MethodChoice::Fixed(m) => {
+            let what = format!(
+                "{m}: calibrating {} images ({} corners)",
+                dataset.num_frames(),
+                dataset.observations.len()
+            );
+            Ok(super::with_progress_line(&what, || {
+                calibrate(dataset, &request(m))
+            })?)
+        }
         MethodChoice::Auto => {
             let auto = AutoSettings::from(c);
             let folds = crate::solver::select::fold_count(dataset.num_frames(), &auto);

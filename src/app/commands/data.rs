@@ -44,7 +44,7 @@ pub struct ImportArgs {
 /// `deformcal detect`.
 #[derive(clap::Args, Debug)]
 pub struct DetectArgs {
-    /// The TOML config whose `[data] photos` to detect.
+    /// The TOML config whose `[data] photos` or `video` to detect.
     #[arg(long, short)]
     pub config: PathBuf,
     /// Also write the observations CSV here (it is always written to the output dir).
@@ -118,8 +118,12 @@ pub fn run_detect(args: DetectArgs) -> Result<()> {
         config.output_dir = o;
     }
     anyhow::ensure!(
-        matches!(config.data, crate::app::config::DataSource::Photos { .. }),
-        "{}: [data] has no `photos` to detect the board in",
+        matches!(
+            config.data,
+            crate::app::config::DataSource::Photos { .. }
+                | crate::app::config::DataSource::Video(_)
+        ),
+        "{}: [data] has no `photos` or `video` to detect the board in",
         args.config.display()
     );
     let (dataset, _) = crate::app::source::load_data(&config)?;

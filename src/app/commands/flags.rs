@@ -29,6 +29,15 @@ pub struct CalibrateArgs {
         group = "source"
     )]
     pub photos: Option<String>,
+    /// A video of the board (decoded with ffmpeg; frames sampled every data.stride,
+    /// the sharp and different ones kept, up to data.max_frames). Sets data.video.
+    #[arg(
+        long,
+        value_name = "FILE",
+        help_heading = "Data (a config, or one of the sources)",
+        group = "source"
+    )]
+    pub video: Option<String>,
     /// Detected corners as CSV (camera,frame,corner,u,v). Sets data.observations.
     #[arg(
         long,
@@ -114,8 +123,9 @@ pub struct CalibrateArgs {
 }
 
 /// The source flags and the key each sets in `[data]`.
-const SOURCES: [(&str, &str); 4] = [
+const SOURCES: [(&str, &str); 5] = [
     ("--photos", "photos"),
+    ("--video", "video"),
     ("--observations", "observations"),
     ("--corners-vnl", "corners_vnl"),
     ("--synthetic", "synthetic"),
@@ -145,6 +155,7 @@ impl CalibrateArgs {
     fn source(&self) -> Option<(&'static str, &'static str, &str)> {
         let given = [
             &self.photos,
+            &self.video,
             &self.observations,
             &self.corners_vnl,
             &self.synthetic,
@@ -167,7 +178,7 @@ pub fn config(args: &CalibrateArgs) -> Result<(Document, Config)> {
     anyhow::ensure!(
         doc.file().is_some() || args.source().is_some() || sets_data,
         "no data given: use --config FILE (see configs/ for examples), or give the data as \
-         --photos, --observations, --corners-vnl or --synthetic (see `deformcal calibrate --help`)"
+         --photos, --video, --observations, --corners-vnl or --synthetic (see `deformcal calibrate --help`)"
     );
     apply_source(&mut doc, args)?;
     apply_board(&mut doc, args)?;
@@ -177,6 +188,7 @@ pub fn config(args: &CalibrateArgs) -> Result<(Document, Config)> {
         doc.set_assignment(assignment, "--set")?;
     }
     image_size_from_photos(&mut doc)?;
+    image_size_from_video(&mut doc)?;
     let mut config = match doc.config() {
         Err(e) if doc.file().is_none() => return Err(with_hint(e)),
         other => other?,
@@ -196,7 +208,7 @@ fn with_hint(e: OverrideError) -> anyhow::Error {
         ("[[cameras]]", "--image-size WxH"),
         (
             "[data] needs",
-            "--photos, --observations, --corners-vnl or --synthetic",
+            "--photos, --video, --observations, --corners-vnl or --synthetic",
         ),
     ];
     let text = e.to_string();
@@ -409,4 +421,25 @@ fn image_size_from_photos(doc: &mut Document) -> Result<()> {
     eprintln!("image size {w}×{h} px, from {name}");
     set_cameras(doc, "width", Value::Integer(w.into()), &flag)?;
     set_cameras(doc, "height", Value::Integer(h.into()), &flag)
+}
+
+/// With a video and one camera without an image size, the size is the video's.
+fn image_size_from_video(doc: &mut Document) -> Result<()> {
+    let Some(video) = doc.get("data", "video").and_then(Value::as_str) else {
+        return Ok(());
+    };
+    let cameras = doc.cameras();
+    let sized = |c: &&toml::Table| c.contains_key("width") && c.contains_key("height");
+    if cameras.len() > 1 || (!cameras.is_empty() && cameras.iter().all(sized)) {
+        return Ok(());
+    }
+    let video = video.to_string();
+    let probe = crate::app::video::ffmpeg::probe(&doc.base().join(&video))?;
+    let flag = format!("data.video {video}: its frame size");
+    eprintln!(
+        "image size {}×{} px, from {video}",
+        probe.width, probe.height
+    );
+    set_cameras(doc, "width", Value::Integer(probe.width.into()), &flag)?;
+    set_cameras(doc, "height", Value::Integer(probe.height.into()), &flag)
 }

@@ -18,6 +18,8 @@ pub enum DataSource {
         base: PathBuf,
         patterns: PhotoPatterns,
     },
+    /// A video whose frames are sampled, detected and chosen (docs/video.md).
+    Video(VideoSource),
     /// An observations CSV (path resolved against the config's folder).
     Observations(PathBuf),
     /// mrgingham's / mrcal's corners table, with file-name patterns per camera.
@@ -33,6 +35,26 @@ pub enum DataSource {
         /// Number of cameras on the simulated rig.
         cameras: usize,
     },
+}
+
+/// `[data] stride` when the config gives none: 6 frames a second of a 30 fps video.
+pub const DEFAULT_STRIDE: usize = 5;
+/// `[data] max_frames` when the config gives none.
+pub const DEFAULT_MAX_FRAMES: usize = 40;
+/// The least `max_frames`: Zhang's initialisation needs three views.
+pub const MIN_MAX_FRAMES: usize = 3;
+
+/// A video and how to sample it (`app::video` reads it) (`[data] video`, `stride`, `max_frames`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct VideoSource {
+    /// The file.
+    pub path: PathBuf,
+    /// The name the config gives it (relative to the config's folder).
+    pub name: String,
+    /// Every `stride`-th frame is decoded.
+    pub stride: usize,
+    /// At most this many frames are calibrated from.
+    pub max_frames: usize,
 }
 
 /// `[reference]`: the static reference set and its board.

@@ -42,6 +42,12 @@ impl Checker<'_> {
         if let DataSource::Photos { patterns, .. } = &data {
             self.check_photo_cameras(patterns, &cameras)?;
         }
+        if matches!(data, DataSource::Video(_)) && cameras.len() != 1 {
+            return Err(self.err(format!(
+                "data.video is one camera's video, but [[cameras]] has {}",
+                cameras.len()
+            )));
+        }
         let output_dir = match raw.output {
             Some(o) => self.base.join(o.dir),
             None => self.base.join("out"),
@@ -64,6 +70,9 @@ impl Checker<'_> {
     fn data_source(&self, data: &RawData) -> Result<DataSource> {
         if data.photos.is_some() {
             return self.photos(data);
+        }
+        if data.video.is_some() || data.stride.is_some() || data.max_frames.is_some() {
+            return self.video(data);
         }
         if let Some(vnl) = &data.corners_vnl {
             if data.observations.is_some() || data.synthetic.is_some() {
@@ -183,6 +192,45 @@ impl Checker<'_> {
             base: self.base.clone(),
             patterns,
         })
+    }
+
+    /// `[data] video` with its `stride` and `max_frames`, which exclude every other source.
+    fn video(&self, data: &RawData) -> Result<DataSource> {
+        let Some(path) = &data.video else {
+            return Err(self.err("data.stride and data.max_frames apply to `video` only".into()));
+        };
+        let others = data.observations.is_some()
+            || data.corners_vnl.is_some()
+            || data.synthetic.is_some()
+            || !data.camera_patterns.is_empty();
+        if others || data.images.is_some() || data.seed.is_some() || data.cameras.is_some() {
+            return Err(self.err(
+                "[data] video excludes photos, observations, corners_vnl, camera_patterns and synthetic data"
+                    .into(),
+            ));
+        }
+        if path.as_os_str().is_empty() {
+            return Err(self.err("data.video: the file name must not be empty".into()));
+        }
+        let stride = data.stride.unwrap_or(super::checked::DEFAULT_STRIDE);
+        if !(1..=10_000).contains(&stride) {
+            return Err(self.err(format!("data.stride must be 1 to 10000, not {stride}")));
+        }
+        let max_frames = data
+            .max_frames
+            .unwrap_or(super::checked::DEFAULT_MAX_FRAMES);
+        if !(super::checked::MIN_MAX_FRAMES..=MAX_IMAGES).contains(&max_frames) {
+            return Err(self.err(format!(
+                "data.max_frames must be {} to {MAX_IMAGES}, not {max_frames}",
+                super::checked::MIN_MAX_FRAMES
+            )));
+        }
+        Ok(DataSource::Video(super::checked::VideoSource {
+            path: self.base.join(path),
+            name: path.to_string_lossy().replace('\\', "/"),
+            stride,
+            max_frames,
+        }))
     }
 
     /// Photo patterns and [[cameras]] must name the same cameras.

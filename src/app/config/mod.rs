@@ -17,7 +17,10 @@ pub use crate::app::text::{number, short};
 pub use calibration::{
     BendOrder, CalibrationConfig, LensPrior, PriorSigma, Priors, DEFAULT_MAX_BEND_MM,
 };
-pub use checked::{Config, DataSource, ReferenceConfig, DEFAULT_SYNTHETIC_SEED};
+pub use checked::{
+    Config, DataSource, ReferenceConfig, VideoSource, DEFAULT_MAX_FRAMES, DEFAULT_STRIDE,
+    DEFAULT_SYNTHETIC_SEED, MIN_MAX_FRAMES,
+};
 pub use limits::*;
 pub use protocol::ProtocolConfig;
 pub use raw::PhotoPatterns;
@@ -94,5 +97,45 @@ mod tests {
         );
         let e = parse("[data]\nsynthetic=\"t9\"\n").unwrap_err().to_string();
         assert!(e.contains("data.synthetic") && e.contains("t9"), "{e}");
+    }
+
+    #[test]
+    fn video_keys_are_checked() {
+        let rig =
+            "[target]\nrows=3\ncols=4\nspacing=0.1\n[[cameras]]\nname=\"c\"\nwidth=10\nheight=10\n";
+        let c = parse(&format!("{rig}[data]\nvideo = \"v/a.mp4\"\n")).unwrap();
+        let DataSource::Video(v) = c.data else {
+            panic!("{:?}", c.data)
+        };
+        assert_eq!(v.path, PathBuf::from("/tmp/x/v/a.mp4"));
+        assert_eq!(
+            (v.stride, v.max_frames),
+            (DEFAULT_STRIDE, DEFAULT_MAX_FRAMES)
+        );
+        let e = parse(&format!("{rig}[data]\nvideo = \"a.mp4\"\nstride = 0\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("data.stride") && e.contains("line 11"), "{e}");
+        let e = parse(&format!("{rig}[data]\nvideo = \"a.mp4\"\nmax_frames = 2\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("data.max_frames"), "{e}");
+        let e = parse(&format!(
+            "{rig}[data]\nvideo = \"a.mp4\"\nobservations = \"o.csv\"\n"
+        ))
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("video excludes"), "{e}");
+        let e = parse(&format!(
+            "{rig}[data]\nobservations = \"o.csv\"\nstride = 2\n"
+        ))
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("apply to `video` only"), "{e}");
+        let two = format!(
+            "{rig}[[cameras]]\nname=\"d\"\nwidth=10\nheight=10\n[data]\nvideo = \"a.mp4\"\n"
+        );
+        let e = parse(&two).unwrap_err().to_string();
+        assert!(e.contains("one camera's video"), "{e}");
     }
 }

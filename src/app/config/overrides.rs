@@ -21,8 +21,9 @@ const CAMERAS: &str = "cameras";
 
 /// The keys that hold paths, relative to the config's folder: made absolute in the
 /// config written beside a result. (`data.photos` may be a table of paths.)
-const PATH_KEYS: [(&str, &str); 6] = [
+const PATH_KEYS: [(&str, &str); 7] = [
     ("data", "observations"),
+    ("data", "video"),
     ("data", "corners_vnl"),
     ("data", "photos"),
     ("target", "geometry"),

@@ -19,6 +19,9 @@ pub(super) struct RawData {
     pub(super) seed: Option<u64>,
     pub(super) cameras: Option<usize>,
     pub(super) photos: Option<PhotoPatterns>,
+    pub(super) video: Option<PathBuf>,
+    pub(super) stride: Option<usize>,
+    pub(super) max_frames: Option<usize>,
 }
 
 #[derive(Debug, Clone, Deserialize)]

@@ -1,4 +1,4 @@
-//! ChArUco boards in OpenCV's layout: the board's description, its detection
+//! ChArUco boards in OpenCV's layout (the board itself is `charuco_spec`): their detection
 //! (calib-targets finds the grid and decodes the markers, our refinement makes
 //! the corners sub-pixel) and the board's printed appearance, which the
 //! renderer and the printable target share. No file I/O, no config parsing.
@@ -12,110 +12,14 @@
 //! target of `rows−1 × cols−1` inner corners, so every method, lens model and
 //! export works on ChArUco data unchanged.
 
+pub use crate::app::detect::charuco_spec::{CharucoSpec, MAX_SQUARES};
+use crate::app::detect::load;
 use crate::app::detect::pipeline::{classify_miss, refine_checked};
-use crate::app::detect::{load, Corner, Detection, Detector, Rejection, SIGMA_REF};
-use crate::model::target::Target;
-use calib_targets::aruco::builtins::{builtin_dictionary, BUILTIN_DICTIONARY_NAMES};
+use crate::app::detect::types::{Corner, Detection, Detector, Rejection};
 use calib_targets::charuco::{CharucoBoardSpec, CharucoDetection, CharucoParams};
 use calib_targets::detect as ct;
-use calib_targets::printable::{board_primitives, CharucoTargetSpec, Fill, Primitive, TargetSpec};
+use calib_targets::printable::{Fill, Primitive};
 use std::panic::{catch_unwind, AssertUnwindSafe};
-
-/// A ChArUco board: squares, their size and the markers' (metres), and the
-/// marker dictionary in OpenCV's spelling (`DICT_5X5_100`).
-#[derive(Clone, Debug, PartialEq)]
-pub struct CharucoSpec {
-    /// Squares per column.
-    pub rows: usize,
-    /// Squares per row.
-    pub cols: usize,
-    /// Square side, metres.
-    pub square: f64,
-    /// Marker side, metres.
-    pub marker: f64,
-    /// Dictionary name as OpenCV spells it.
-    pub dictionary: String,
-}
-
-/// Most squares a side may have: a dictionary of 1000 markers fills 44 × 44.
-pub const MAX_SQUARES: usize = 200;
-
-impl CharucoSpec {
-    /// The inner-corner board the solver sees (ids are its corner indices).
-    pub fn target(&self) -> Target {
-        Target {
-            rows: self.rows.saturating_sub(1),
-            cols: self.cols.saturating_sub(1),
-            spacing: self.square,
-        }
-    }
-
-    /// Number of markers: one on every white square.
-    pub fn num_markers(&self) -> usize {
-        self.rows * self.cols / 2
-    }
-
-    /// Why this cannot be a ChArUco board, as `key message` for `[target]`.
-    pub fn problem(&self) -> Option<String> {
-        if self.rows < 3 || self.cols < 3 || self.rows > MAX_SQUARES || self.cols > MAX_SQUARES {
-            return Some(format!(
-                "rows and cols count squares and must be 3 to {MAX_SQUARES} (got {} × {})",
-                self.rows, self.cols
-            ));
-        }
-        let Some(dict) = builtin_dictionary(&self.dictionary) else {
-            return Some(format!(
-                "dictionary `{}` is not one of OpenCV's: {}",
-                self.dictionary,
-                BUILTIN_DICTIONARY_NAMES.join(", ")
-            ));
-        };
-        if dict.codes().len() < self.num_markers() {
-            return Some(format!(
-                "dictionary `{}` has {} markers, a board of {} × {} squares needs {}",
-                self.dictionary,
-                dict.codes().len(),
-                self.rows,
-                self.cols,
-                self.num_markers()
-            ));
-        }
-        if !(self.marker > 0.0 && self.marker < self.square) {
-            return Some(format!(
-                "marker must be larger than 0 and smaller than square ({} m), got {} m",
-                self.square, self.marker
-            ));
-        }
-        None
-    }
-
-    /// calib-targets' description of the board (sizes in millimetres).
-    fn board_spec(&self) -> Option<CharucoBoardSpec> {
-        let dict = builtin_dictionary(&self.dictionary)?;
-        Some(CharucoBoardSpec::new(
-            self.rows as u32,
-            self.cols as u32,
-            (self.square * 1000.0) as f32,
-            (self.marker / self.square) as f32,
-            dict,
-        ))
-    }
-
-    /// The printable board's black and white rectangles in millimetres, origin
-    /// at the board's top-left outer corner (x right, y down), from calib-targets'
-    /// printable-target generator.
-    pub fn primitives(&self) -> Option<Vec<Primitive>> {
-        let dict = builtin_dictionary(&self.dictionary)?;
-        let spec = CharucoTargetSpec::new(
-            self.rows as u32,
-            self.cols as u32,
-            self.square * 1000.0,
-            self.marker / self.square,
-            dict,
-        );
-        board_primitives(&TargetSpec::Charuco(spec)).ok()
-    }
-}
 
 /// The board's reflectance at a point of deformcal's board frame (metres, origin
 /// at corner 0, see the module doc): `dark`/`light` on the board, `None` off
@@ -246,12 +150,7 @@ pub(crate) fn detect(
             let local = local_cell_px(&found, c.grid.u, c.grid.v, start).unwrap_or(cell);
             let half = ((0.8 * gap * local).floor() as usize).clamp(2, 12);
             let r = refine_checked(&fimg, start, half)?;
-            Some(Corner {
-                index: c.id as usize,
-                uv: r.uv,
-                sigma: r.sigma,
-                weight: 1.0 / (1.0 + (r.sigma / SIGMA_REF).powi(2)),
-            })
+            Some(Corner::new(c.id as usize, r.uv, r.sigma))
         })
         .collect();
     corners.sort_by_key(|c| c.index);

@@ -7,7 +7,7 @@
 //! header lies.
 
 use crate::app::detect::refine::FloatImage;
-use crate::app::detect::Rejection;
+use crate::app::detect::types::Rejection;
 use image::{DynamicImage, GrayImage, ImageReader, Limits};
 use std::io::Cursor;
 use std::path::Path;

@@ -4,9 +4,10 @@
 //! is a small function so failures map cleanly onto a `Rejection`.
 
 use crate::app::detect::grow;
+use crate::app::detect::load;
 use crate::app::detect::orient::{self, Labelled, OrientError};
 use crate::app::detect::refine::{self, FloatImage};
-use crate::app::detect::{load, Corner, Detection, Detector, Rejection, SIGMA_REF};
+use crate::app::detect::types::{Corner, Detection, Detector, Rejection};
 use calib_targets::chessboard::ChessboardParams;
 use calib_targets::detect as ct;
 use std::collections::HashMap;
@@ -32,16 +33,52 @@ pub(crate) fn detect(
     }
     let fimg = load::to_float(img);
     let gray = load::to_gray8(&fimg);
-    let (raw, cell) = match find_grid(&gray)? {
-        Some(found) => found,
-        None => return Err(classify_miss(&fimg)),
+    // Coarse to fine first: ChESS finds seeds on a downscaled pyramid level and
+    // computes its response at full resolution only around them, several times
+    // less work than the full-image response. It misses corners now and then
+    // (small squares, a fisheye's rim), so a view it does not find complete is
+    // looked at again at full resolution, and that result stands, as if the
+    // coarse pass had not been made.
+    let coarse = locate(det, &fimg, &gray, rows, cols, Scale::Pyramid);
+    if matches!(&coarse, Ok(d) if d.complete) {
+        return coarse;
+    }
+    locate(det, &fimg, &gray, rows, cols, Scale::Full)
+}
+
+/// Where ChESS computes its response: around seeds from a downscaled pyramid
+/// level, or over the whole image.
+#[derive(Clone, Copy)]
+enum Scale {
+    Pyramid,
+    Full,
+}
+
+/// Find, refine, grow and index the board with ChESS at `scale`.
+fn locate(
+    det: &Detector,
+    fimg: &FloatImage,
+    gray: &image::GrayImage,
+    rows: usize,
+    cols: usize,
+    scale: Scale,
+) -> Result<Detection, Rejection> {
+    let (width, height) = (fimg.width as u32, fimg.height as u32);
+    // Why nothing was found matters only for the last pass.
+    let miss = || match scale {
+        Scale::Pyramid => Rejection::NoBoard,
+        Scale::Full => classify_miss(fimg),
     };
-    let refined = grow::grow(&fimg, refine_all(&fimg, raw, cell), rows, cols);
+    let (raw, cell) = match find_grid(gray, scale)? {
+        Some(found) => found,
+        None => return Err(miss()),
+    };
+    let refined = grow::grow(fimg, refine_all(fimg, raw, cell), rows, cols);
     let needed = det.min_corners.min(rows * cols);
     if refined.len() < needed {
         // A handful of corners on a featureless-looking image is blur, not
         // a small board.
-        return Err(match classify_miss(&fimg) {
+        return Err(match miss() {
             Rejection::Blurred => Rejection::Blurred,
             _ => Rejection::TooFewCorners {
                 found: refined.len(),
@@ -49,19 +86,14 @@ pub(crate) fn detect(
             },
         });
     }
-    let indexed = orient::assign_indices(&refined, &fimg, rows, cols).map_err(|e| match e {
+    let indexed = orient::assign_indices(&refined, fimg, rows, cols).map_err(|e| match e {
         OrientError::NoFit => Rejection::NoBoard,
         OrientError::Ambiguous => Rejection::PartialAmbiguous,
     })?;
     let mut corners: Vec<Corner> = indexed
         .corners
         .into_iter()
-        .map(|(index, c)| Corner {
-            index,
-            uv: c.uv,
-            sigma: c.sigma,
-            weight: 1.0 / (1.0 + (c.sigma / SIGMA_REF).powi(2)),
-        })
+        .map(|(index, c)| Corner::new(index, c.uv, c.sigma))
         .collect();
     corners.sort_by_key(|c| c.index);
     corners.dedup_by_key(|c| c.index);
@@ -117,9 +149,15 @@ pub(crate) fn refine_checked(
 
 /// Run calib-targets; returns the labelled corners and the cell size in px.
 /// A panic inside the dependency is turned into `Rejection::Internal`.
-fn find_grid(gray: &image::GrayImage) -> Result<Option<(Vec<Labelled>, f64)>, Rejection> {
+fn find_grid(
+    gray: &image::GrayImage,
+    scale: Scale,
+) -> Result<Option<(Vec<Labelled>, f64)>, Rejection> {
     let run = || {
-        let cfg = ct::default_chess_config();
+        let mut cfg = ct::default_chess_config();
+        if let Scale::Pyramid = scale {
+            cfg.multiscale = chess_corners::MultiscaleConfig::pyramid_default();
+        }
         let found = ct::detect_chessboard(gray, &cfg, &ChessboardParams::default()).ok()?;
         let labelled: Vec<Labelled> = found
             .corners

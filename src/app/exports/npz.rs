@@ -94,12 +94,15 @@ pub struct TooLarge;
 pub fn npz(entries: &[(&str, Npy)]) -> Result<Vec<u8>, TooLarge> {
     let mut out = Vec::new();
     let mut central = Vec::new();
+    // Deflate's fastest level and one encoder for every entry: the default level
+    // took most of the time of writing a whole result set for a few per cent of
+    // the size, and each new encoder allocates its tables again.
+    let mut z = DeflateEncoder::new(Vec::new(), Compression::fast());
     for (key, array) in entries {
         let name = format!("{key}.npy");
         let raw = array.to_bytes();
-        let mut z = DeflateEncoder::new(Vec::new(), Compression::default());
         z.write_all(&raw).expect("writing to a Vec cannot fail");
-        let packed = z.finish().expect("writing to a Vec cannot fail");
+        let packed = z.reset(Vec::new()).expect("writing to a Vec cannot fail");
         let entry = ZipEntry {
             name: &name,
             crc: crc32fast::hash(&raw),

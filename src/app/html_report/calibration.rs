@@ -62,6 +62,11 @@ pub fn calibration_page(
         "The board: static correction and bends",
         board_section(c)?,
     );
+    p.section(
+        "advice",
+        "Where to hold the board next",
+        super::advice::advice_section(c),
+    );
     p.section("frames", "Every frame", frames_section(c, &stats, labels));
     p.section("definitions", "Definitions", definitions());
     Ok(p.render())

@@ -6,6 +6,7 @@
 use crate::app::html_report::fields::{Arrows, Grid};
 use crate::app::plots::contour_segments;
 use crate::app::plots::{self, pe, short, Drawn, Mark, AXIS_DESC, LABEL, PALETTE, TITLE};
+use crate::app::raster;
 use crate::error::Result;
 use crate::model::board::{Method, Paraboloid};
 use crate::model::target::Target;
@@ -90,18 +91,24 @@ pub fn residual_quiver(
     scale: f64,
 ) -> Result<String> {
     let size = image_figure(width, height, 0);
-    plots::svg(title, size, |root| {
+    // Thousands of arrows: one <path> spliced in for them (`raster`), not one
+    // element each.
+    let mut arrows = String::new();
+    let mut svg = plots::svg(title, size, |root| {
         let (top, key) = root.split_vertically(size.1 - KEY);
         let mut chart = image_chart(&top, title, width, height)?;
-        let style = PALETTE[0].mix(0.8).stroke_width(1);
-        chart
-            .draw_series(a.arrows.iter().map(|(p, r)| {
-                PathElement::new(
-                    plots::arrow((p[0], p[1]), (r[0] * scale, r[1] * scale), 0.3),
-                    style,
-                )
-            }))
-            .map_err(pe)?;
+        arrows = raster::polylines_path(
+            a.arrows.iter().map(|(p, r)| {
+                plots::arrow((p[0], p[1]), (r[0] * scale, r[1] * scale), 0.3)
+                    .iter()
+                    .map(|q| chart.backend_coord(q))
+                    .collect()
+            }),
+            PALETTE[0],
+            0.8,
+            1,
+        );
+        raster::placeholder(&mut chart, (-0.5, -0.5), (-0.5, -0.5))?;
         chart
             .draw_series(
                 rejected
@@ -123,7 +130,10 @@ pub fn residual_quiver(
             ),
         ];
         plots::key_strip(&key, KEY_X, &items)
-    })
+    })?;
+    raster::splice(&mut svg, |_| Ok(arrows))
+        .map_err(|e| crate::error::Error::Invalid(format!("{title}: plotting failed: {e}")))?;
+    Ok(svg)
 }
 
 /// A label cut to at most `n` characters, keeping its end (a file name's tail
@@ -269,16 +279,20 @@ pub fn distortion_map(
 ) -> Result<String> {
     let bar = BAR;
     let size = image_figure(width, height, bar);
-    plots::svg(title, size, |root| {
+    let magnitude: Vec<f64> = grid
+        .values
+        .iter()
+        .map(|d| d.map_or(f64::NAN, |d| d[0].hypot(d[1])))
+        .collect();
+    let mut svg = plots::svg(title, size, |root| {
         let (main, legend) = root.split_horizontally(size.0 - bar);
         let (top, key) = main.split_vertically(size.1 - KEY);
         let mut chart = image_chart(&top, title, width, height)?;
-        let magnitude: Vec<f64> = grid
-            .values
-            .iter()
-            .map(|d| d.map_or(f64::NAN, |d| d[0].hypot(d[1])))
-            .collect();
-        draw_heat(&mut chart, grid, &magnitude, s.clip_px)?;
+        let extent = (
+            grid.nx as f64 * grid.dx - 0.5,
+            grid.ny as f64 * grid.dy - 0.5,
+        );
+        raster::placeholder(&mut chart, (-0.5, -0.5), extent)?;
         draw_contours(&mut chart, grid, &magnitude, s)?;
         let arrows = (0..grid.ny)
             .skip(arrow_every / 2)
@@ -315,7 +329,10 @@ pub fn distortion_map(
         plots::colour_bar(&legend, "length (px)", (0.0, s.clip_px), |v| {
             plots::sequential(v / s.clip_px)
         })
-    })
+    })?;
+    raster::embed(&mut svg, &heat_cells(grid, &magnitude, s.clip_px))
+        .map_err(|e| crate::error::Error::Invalid(format!("{title}: plotting failed: {e}")))?;
+    Ok(svg)
 }
 
 type PixelChart<'a, DB> = ChartContext<
@@ -324,28 +341,24 @@ type PixelChart<'a, DB> = ChartContext<
     Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
 >;
 
-/// A grid's values as coloured cells (grey where a value is missing).
-fn draw_heat<DB: DrawingBackend, T>(
-    chart: &mut PixelChart<'_, DB>,
-    grid: &Grid<T>,
-    values: &[f64],
-    clip: f64,
-) -> Drawn {
-    let cells = (0..grid.ny).flat_map(|j| (0..grid.nx).map(move |i| (i, j)));
-    chart
-        .draw_series(cells.map(|(i, j)| {
-            let (u, v) = grid.centre(i, j);
-            let (hx, hy) = (grid.dx / 2.0, grid.dy / 2.0);
-            let value = values[j * grid.nx + i];
-            let colour = if value.is_finite() {
+/// A grid's values as coloured cells (grey where a value is missing), one
+/// embedded image put in place of [`raster::placeholder`] by [`raster::embed`].
+fn heat_cells<T>(grid: &Grid<T>, values: &[f64], clip: f64) -> raster::Cells {
+    let colours = values
+        .iter()
+        .map(|&value| {
+            if value.is_finite() {
                 plots::sequential(value / clip)
             } else {
                 RGBColor(200, 200, 200)
-            };
-            Rectangle::new([(u - hx, v - hy), (u + hx, v + hy)], colour.filled())
-        }))
-        .map_err(pe)?;
-    Ok(())
+            }
+        })
+        .collect();
+    raster::Cells {
+        columns: grid.nx,
+        rows: grid.ny,
+        colours,
+    }
 }
 
 /// Contour lines of a magnitude at every multiple of the step below the clip,

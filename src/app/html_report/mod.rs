@@ -5,8 +5,10 @@
 //! - `page`: the HTML building blocks (escaping, page shell, tables, figures).
 //! - `fields` and `figures`: the numbers behind the calibration figures, and the
 //!   figures themselves (plotters; shared primitives in `app::plots`).
-//! - `calibration`: what the calibration page shows, section by section.
+//! - `calibration`: what the calibration page shows, section by section;
+//!   `advice`: its section on where to hold the board next (`app::advise`).
 //! - `protocol`: the protocol page, from the tables `app::protocol_report` builds.
+pub mod advice;
 pub mod calibration;
 pub mod fields;
 pub mod figures;

@@ -5,7 +5,10 @@
 //! A file whose size and mtime are unchanged is trusted without reading it (the
 //! fast path, as `git` does for its index); otherwise its content is hashed, so a
 //! copied or touched but identical file is still a hit. The whole cache is valid
-//! only for the detector version and settings and the board it was made with.
+//! only for its own format [`VERSION`], the detector version and settings and the
+//! board it was made with; a cache of another format or a broken file is a miss
+//! for every image, never an error.
+use crate::app::detect::Corner;
 use crate::app::fsio::write_atomic;
 use crate::error::Result;
 use serde::{Deserialize, Serialize};
@@ -14,6 +17,10 @@ use std::path::Path;
 
 /// The cache file's name in the output dir.
 pub const FILE_NAME: &str = "detections.cache.json";
+
+/// The format of the cache file; raise it whenever what an entry holds changes,
+/// so that older files are read as misses. 2: typed corners with their weight.
+pub const VERSION: u32 = 2;
 
 /// What a detection produced for one image, as kept in the cache.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -26,8 +33,8 @@ pub struct Outcome {
     pub status: Status,
     /// Why the image was rejected or unreadable; empty otherwise.
     pub reason: String,
-    /// Per corner: index, u, v, σ (px).
-    pub corners: Vec<[f64; 4]>,
+    /// The corners exactly as the detector gave them (id, pixel, weight, σ).
+    pub corners: Vec<Corner>,
     /// The board looks alike turned by 180° and the view was labelled by its
     /// orientation in the image (`Detection::labelled_by_symmetry`).
     #[serde(default)]
@@ -84,11 +91,17 @@ pub struct Entry {
     pub stamp: Stamp,
     /// The detection.
     pub outcome: Outcome,
+    /// A video frame's sharpness (`app::video`), so a rerun need not decode it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sharpness: Option<f64>,
 }
 
 /// The cache file: the settings it is valid for and the entries.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct Cache {
+    /// The file's format, [`VERSION`] (0 in a file from before it was recorded).
+    #[serde(default)]
+    pub version: u32,
     /// Detector version, settings and board; any change voids every entry.
     pub settings: String,
     /// By image name relative to the config's folder.
@@ -96,10 +109,12 @@ pub struct Cache {
 }
 
 impl Cache {
-    /// The cache in `dir` if it exists, is readable and was made with `settings`;
-    /// otherwise an empty one (a broken cache only costs a new detection).
+    /// The cache in `dir` if it exists, is readable, of this [`VERSION`] and
+    /// made with `settings`; otherwise an empty one (an old or broken cache only
+    /// costs a new detection).
     pub fn load(dir: &Path, settings: &str) -> Cache {
         let fresh = Cache {
+            version: VERSION,
             settings: settings.to_string(),
             images: BTreeMap::new(),
         };
@@ -107,7 +122,7 @@ impl Cache {
             return fresh;
         };
         match serde_json::from_slice::<Cache>(&text) {
-            Ok(c) if c.settings == settings => c,
+            Ok(c) if c.version == VERSION && c.settings == settings => c,
             _ => fresh,
         }
     }
@@ -128,7 +143,7 @@ impl Cache {
         if h == entry.stamp.hash {
             return Lookup::Hit(Entry {
                 stamp: Stamp { hash: h, ..stamp },
-                outcome: entry.outcome.clone(),
+                ..entry.clone()
             });
         }
         Lookup::Miss(Some(h))
@@ -167,7 +182,14 @@ pub fn stamp_of(meta: &std::fs::Metadata) -> Stamp {
 /// and fast enough next to decoding the image; collisions only matter by
 /// accident here, nobody gains by forging one.
 pub fn fnv1a(bytes: &[u8]) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    fnv1a_extend(FNV_START, bytes)
+}
+
+/// FNV-1a's starting value, for [`fnv1a_extend`].
+pub const FNV_START: u64 = 0xcbf2_9ce4_8422_2325;
+
+/// FNV-1a of what `h` hashed followed by `bytes`: a file hashed piece by piece.
+pub fn fnv1a_extend(mut h: u64, bytes: &[u8]) -> u64 {
     for &b in bytes {
         h ^= b as u64;
         h = h.wrapping_mul(0x0000_0100_0000_01b3);
@@ -194,6 +216,7 @@ mod tests {
                 corners: vec![],
                 by_symmetry: false,
             },
+            sharpness: None,
         }
     }
 
@@ -223,6 +246,32 @@ mod tests {
             c.lookup("b.png", s(10, 5), || 99),
             Lookup::Miss(None)
         ));
+    }
+
+    #[test]
+    fn an_old_or_broken_cache_file_is_empty() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut c = Cache::load(dir.path(), "s");
+        assert_eq!(c.version, VERSION);
+        let mut e = entry(10, 5, 99);
+        e.outcome.status = Status::Complete;
+        e.outcome.corners = vec![Corner::new(3, [1.5, 2.25], 0.2)];
+        c.images.insert("a.png".into(), e.clone());
+        c.save(dir.path()).unwrap();
+        let back = Cache::load(dir.path(), "s");
+        assert_eq!(back.images["a.png"], e);
+        assert!(Cache::load(dir.path(), "other settings").images.is_empty());
+        // The format before typed corners: no version, a corner as 4 floats.
+        let old = r#"{"settings":"s","images":{"a.png":{"stamp":{"size":10,"mtime_ns":5,"hash":99},
+            "outcome":{"width":1,"height":1,"status":"complete","reason":"","corners":[[3.0,1.5,2.25,0.2]]}}}}"#;
+        std::fs::write(dir.path().join(FILE_NAME), old).unwrap();
+        assert!(Cache::load(dir.path(), "s").images.is_empty());
+        // The same with a version number of the current format but the old corners.
+        let mixed = old.replacen('{', &format!("{{\"version\":{VERSION},"), 1);
+        std::fs::write(dir.path().join(FILE_NAME), mixed).unwrap();
+        assert!(Cache::load(dir.path(), "s").images.is_empty());
+        std::fs::write(dir.path().join(FILE_NAME), b"{\"version\":2,\"sett").unwrap();
+        assert!(Cache::load(dir.path(), "s").images.is_empty());
     }
 
     #[test]

@@ -86,6 +86,7 @@ pub fn detect_photos(
             let entry = Entry {
                 stamp: d.stamp?,
                 outcome: d.result.outcome.clone(),
+                sharpness: None,
             };
             Some((d.result.file.name.clone(), entry))
         })
@@ -118,7 +119,7 @@ struct Detected {
 
 /// The detector version, its settings and the board: a cache made with other
 /// values is not used.
-fn settings_key(d: &Detector, target: Target) -> String {
+pub(crate) fn settings_key(d: &Detector, target: Target) -> String {
     format!(
         "{}; rows {} cols {}; max_pixels {} min_corners {}{}",
         detect::ALGORITHM,
@@ -229,7 +230,11 @@ fn detect_one(file: &ImageFile, detector: &Detector, target: Target, cache: &Cac
 }
 
 /// The cacheable outcome of one detection.
-fn outcome_of(det: std::result::Result<Detection, Rejection>, width: u32, height: u32) -> Outcome {
+pub(crate) fn outcome_of(
+    det: std::result::Result<Detection, Rejection>,
+    width: u32,
+    height: u32,
+) -> Outcome {
     match det {
         Ok(d) => Outcome {
             width,
@@ -240,11 +245,7 @@ fn outcome_of(det: std::result::Result<Detection, Rejection>, width: u32, height
                 Status::Partial
             },
             reason: d.note().to_string(),
-            corners: d
-                .corners
-                .iter()
-                .map(|c| [c.index as f64, c.uv[0], c.uv[1], c.sigma])
-                .collect(),
+            corners: d.corners,
             by_symmetry: d.labelled_by_symmetry,
         },
         Err(r) => Outcome {
@@ -326,30 +327,20 @@ fn short_reason(reason: &str) -> String {
         .to_string()
 }
 
-/// The observations of the usable images; a corner's weight is σ_ref/σ, capped at
-/// 1, so its residual is in units of its own noise (as 0.5^level for mrgingham).
+/// The observations of the usable images, each corner with the weight the
+/// detector gave it ([`detect::observation_weight`]), not recomputed here.
 fn dataset_of(images: &[ImageResult], target: Target, cameras: &[CameraSpec]) -> Dataset {
     let usable = images.iter().filter(|r| r.outcome.status.usable());
     let corners = usable.flat_map(|r| {
         r.outcome.corners.iter().map(|c| DetectedCorner {
             camera: r.file.camera,
             frame_id: r.file.frame,
-            // The cache keeps a corner as four floats; the id is a whole number.
-            corner: c[0] as usize,
-            uv: [c[1], c[2]],
-            weight: corner_weight(c[3]),
+            corner: c.index,
+            uv: c.uv,
+            weight: c.weight,
         })
     });
     Dataset::from_detected(target, cameras.to_vec(), corners)
-}
-
-/// The observation weight of a corner with refinement σ (px): σ_ref/σ in (0, 1].
-pub fn corner_weight(sigma: f64) -> f64 {
-    if sigma.is_finite() && sigma > detect::SIGMA_REF {
-        detect::SIGMA_REF / sigma
-    } else {
-        1.0
-    }
 }
 
 /// `detections.csv` (docs/conventions.md §5): file, camera, frame, corners, status, reason.

@@ -156,5 +156,6 @@ fn dataset_name(config: &Config) -> String {
         crate::app::config::DataSource::Observations(p) => p.display().to_string(),
         crate::app::config::DataSource::CornersVnl { path, .. } => path.display().to_string(),
         crate::app::config::DataSource::Photos { base, .. } => base.display().to_string(),
+        crate::app::config::DataSource::Video(v) => v.path.display().to_string(),
     }
 }
