@@ -25,9 +25,9 @@
 //!    dropped if still asymmetric: a missing corner is harmless, a wrong one
 //!    is not.
 //! 4. `grow`: extend the labelled grid outward along its rows and columns
-//!    (quadratic extrapolation, then refinement with a window of 0.4× the
-//!    local spacing), to the compressed squares near a fisheye's rim that
-//!    the grid finder gives up on.
+//!    (quadratic extrapolation, then refinement in a window shaped by the
+//!    local grid vectors), to the compressed squares near a fisheye's rim
+//!    that the grid finder gives up on.
 //! 5. [`orient`]: place the labelled patch on the board (handedness, square
 //!    colour, visible board edges); partial views that fit in several places
 //!    are rejected, those that fit the board turned by 180° kept (the
