@@ -44,7 +44,9 @@ fn random_scene(s: &CharucoSpec, k: u64) -> Scene {
     sc.blur = uniform(0.5, 1.2);
     sc.noise = 2.0;
     sc.seed = k;
-    sc.supersample = 4;
+    // 4×4 supersampling aliases the junctions by a few hundredths of a pixel,
+    // which would be charged to the detector.
+    sc.supersample = 16;
     sc
 }
 
@@ -144,15 +146,9 @@ fn rms(sq: &[f64]) -> f64 {
     (sq.iter().sum::<f64>() / sq.len().max(1) as f64).sqrt()
 }
 
-/// Random poses, blur, noise and partial views on four boards and three
-/// dictionaries: every id right, corners within the bound of the truth, at least
-/// as many as OpenCV finds on the same images.
-#[test]
-#[ignore = "fails its targets (measured: DICT_4X4_50 5x7, 12 views: 0.070 px RMS, 260 corners vs OpenCV's 268; every id right); run with --ignored"]
-fn rendered_charuco_boards_match_truth_and_opencv() {
-    if !common::python_has(&["cv2"]) {
-        return;
-    }
+/// Per board of four boards and three dictionaries (random poses, blur, noise,
+/// partial views): our tally and OpenCV's on the same images, every id right.
+fn tallies() -> Vec<(CharucoSpec, Tally)> {
     let dir = tempfile::tempdir().unwrap();
     let boards = [
         spec(5, 7, "DICT_4X4_50"),
@@ -160,19 +156,45 @@ fn rendered_charuco_boards_match_truth_and_opencv() {
         spec(6, 8, "DICT_6X6_250"),
         spec(8, 6, "DICT_4X4_50"),
     ];
-    let (mut all_ours, mut all_theirs) = (Vec::new(), Vec::new());
-    for s in &boards {
-        let tally = check_board(s, 12, dir.path());
-        eprintln!(
-            "{} {}x{}: ours {} corners, RMS {:.4} px; OpenCV {} corners, RMS {:.4} px",
-            s.dictionary,
-            s.rows,
-            s.cols,
-            tally.ours.len(),
-            rms(&tally.ours),
-            tally.theirs.len(),
-            rms(&tally.theirs)
-        );
+    boards
+        .into_iter()
+        .map(|s| {
+            let tally = check_board(&s, 12, dir.path());
+            eprintln!(
+                "{} {}x{}: ours {} corners, RMS {:.4} px; OpenCV {} corners, RMS {:.4} px",
+                s.dictionary,
+                s.rows,
+                s.cols,
+                tally.ours.len(),
+                rms(&tally.ours),
+                tally.theirs.len(),
+                rms(&tally.theirs)
+            );
+            (s, tally)
+        })
+        .collect()
+}
+
+/// Every id right and our corners within 0.06 px RMS of the truth.
+#[test]
+fn rendered_charuco_corners_match_truth() {
+    if !common::python_has(&["cv2"]) {
+        return;
+    }
+    let all: Vec<f64> = tallies().into_iter().flat_map(|(_, t)| t.ours).collect();
+    let ours = rms(&all);
+    eprintln!("all boards: ours RMS {ours:.4} px over {}", all.len());
+    assert!(ours <= 0.06, "RMS {ours} px");
+}
+
+/// At least as many corners as OpenCV finds on the same images.
+#[test]
+#[ignore = "fails its target (measured: 1432 corners against OpenCV's 1577 over 48 views; DICT_6X6_250 6x8: 273 vs 380); run with --ignored"]
+fn rendered_charuco_boards_find_as_many_corners_as_opencv() {
+    if !common::python_has(&["cv2"]) {
+        return;
+    }
+    for (s, tally) in tallies() {
         assert!(
             tally.ours.len() >= tally.theirs.len(),
             "{}: {} corners, OpenCV {}",
@@ -180,17 +202,7 @@ fn rendered_charuco_boards_match_truth_and_opencv() {
             tally.ours.len(),
             tally.theirs.len()
         );
-        all_ours.extend(tally.ours);
-        all_theirs.extend(tally.theirs);
     }
-    let ours = rms(&all_ours);
-    eprintln!(
-        "all boards: ours RMS {ours:.4} px over {}, OpenCV {:.4} px over {}",
-        all_ours.len(),
-        rms(&all_theirs),
-        all_theirs.len()
-    );
-    assert!(ours <= 0.06, "RMS {ours} px");
 }
 
 fn deformcal(args: &[&str]) -> std::process::Output {

@@ -15,6 +15,7 @@
 pub use crate::app::detect::charuco_spec::{CharucoSpec, MAX_SQUARES};
 use crate::app::detect::load;
 use crate::app::detect::pipeline::{classify_miss, refine_checked};
+use crate::app::detect::refine::{refine_masked, Axes, FloatImage, Refined};
 use crate::app::detect::types::{Corner, Detection, Detector, Rejection};
 use calib_targets::charuco::{CharucoBoardSpec, CharucoDetection, CharucoParams};
 use calib_targets::detect as ct;
@@ -147,9 +148,13 @@ pub(crate) fn detect(
         .filter(|c| (c.id as usize) < n)
         .filter_map(|c| {
             let start = [c.position.x as f64, c.position.y as f64];
-            let local = local_cell_px(&found, c.grid.u, c.grid.v, start).unwrap_or(cell);
-            let half = ((0.8 * gap * local).floor() as usize).clamp(2, 12);
-            let r = refine_checked(&fimg, start, half)?;
+            let r = grid_axes(&found, c.grid.u, c.grid.v, start)
+                .and_then(|axes| refine_along_edges(&fimg, start, axes, gap))
+                .or_else(|| {
+                    let local = local_cell_px(&found, c.grid.u, c.grid.v, start).unwrap_or(cell);
+                    let half = ((0.8 * gap * local).floor() as usize).clamp(2, 12);
+                    refine_checked(&fimg, start, half)
+                })?;
             Some(Corner::new(c.id as usize, r.uv, r.sigma))
         })
         .collect();
@@ -221,4 +226,50 @@ fn local_cell_px(found: &CharucoDetection, u: i32, v: i32, at: [f64; 2]) -> Opti
         .filter(|o| (o.grid.u - u).abs() + (o.grid.v - v).abs() == 1)
         .map(|o| (o.position.x as f64 - at[0]).hypot(o.position.y as f64 - at[1]))
         .min_by(f64::total_cmp)
+}
+
+/// How far along the edges through a junction the window reaches, in cells:
+/// short of the next junction (one cell away) by more than a blur's width.
+const EDGE_REACH: f64 = 0.45;
+/// Pixels kept between the window and a marker's edge, for the blur.
+const MARKER_CLEARANCE_PX: f64 = 2.5;
+/// The symmetry check of the pipeline's refinement.
+const MAX_ASYMMETRY: f64 = 0.05;
+
+/// Refine in a cross-shaped window along the grid: the four edges through
+/// the junction out to [`EDGE_REACH`] of a cell, each arm as wide as the gap
+/// between the corner and the markers allows. The markers sit inside the
+/// white squares at least `gap` (cells) from both edge lines, so the arms see
+/// the junction's edges over a long stretch, and no marker edge, which a
+/// square window of the same reach would take in. None when the gap is too
+/// narrow at this scale or the result is not point symmetric.
+fn refine_along_edges(img: &FloatImage, start: [f64; 2], axes: Axes, gap: f64) -> Option<Refined> {
+    let len = |e: [f64; 2]| e[0].hypot(e[1]);
+    let shortest = len(axes[0]).min(len(axes[1]));
+    let arm = gap - MARKER_CLEARANCE_PX / shortest;
+    if arm * shortest < 1.5 {
+        return None;
+    }
+    let keep = |a: f64, b: f64| a.abs() <= arm || b.abs() <= arm;
+    refine_masked(img, start, axes, EDGE_REACH, &keep).filter(|r| r.asymmetry <= MAX_ASYMMETRY)
+}
+
+/// The image vectors from the corner at grid (u, v) to its next corners along
+/// the grid's two axes: a central difference where both neighbours were found,
+/// else the one-sided one.
+fn grid_axes(found: &CharucoDetection, u: i32, v: i32, at: [f64; 2]) -> Option<Axes> {
+    let pos = |du: i32, dv: i32| {
+        found
+            .corners
+            .iter()
+            .find(|o| o.grid.u == u + du && o.grid.v == v + dv)
+            .map(|o| [o.position.x as f64, o.position.y as f64])
+    };
+    let axis = |du: i32, dv: i32| match (pos(du, dv), pos(-du, -dv)) {
+        (Some(p), Some(m)) => Some([(p[0] - m[0]) / 2.0, (p[1] - m[1]) / 2.0]),
+        (Some(p), None) => Some([p[0] - at[0], p[1] - at[1]]),
+        (None, Some(m)) => Some([at[0] - m[0], at[1] - m[1]]),
+        (None, None) => None,
+    };
+    Some([axis(1, 0)?, axis(0, 1)?])
 }

@@ -233,7 +233,25 @@ pub type Axes = [[f64; 2]; 2];
 /// diagonal, which a square window sized to the shortest spacing still does.
 /// None as for [`refine_corner`].
 pub fn refine_affine(img: &FloatImage, start: [f64; 2], axes: Axes, frac: f64) -> Option<Refined> {
-    let win = AffineWindow::new(axes, frac)?;
+    refine_in(img, start, AffineWindow::new(axes, frac, &|_, _| true)?)
+}
+
+/// [`refine_affine`] on the part of the window where `keep(a, b)` holds, (a, b)
+/// the offset in cell units along the two grid vectors. `keep` must be point
+/// symmetric (keep(a, b) = keep(−a, −b)) so that the symmetry check still
+/// compares mirrored samples: a ChArUco board uses it to reach along the four
+/// edges through a junction while leaving out its markers.
+pub fn refine_masked(
+    img: &FloatImage,
+    start: [f64; 2],
+    axes: Axes,
+    frac: f64,
+    keep: &dyn Fn(f64, f64) -> bool,
+) -> Option<Refined> {
+    refine_in(img, start, AffineWindow::new(axes, frac, keep)?)
+}
+
+fn refine_in(img: &FloatImage, start: [f64; 2], win: AffineWindow) -> Option<Refined> {
     let mut p = start;
     let mut last = None;
     for _ in 0..MAX_ITERS {
@@ -270,7 +288,7 @@ struct AffineWindow {
 }
 
 impl AffineWindow {
-    fn new(axes: Axes, frac: f64) -> Option<AffineWindow> {
+    fn new(axes: Axes, frac: f64, keep: &dyn Fn(f64, f64) -> bool) -> Option<AffineWindow> {
         let [eu, ev] = axes;
         let (lu, lv) = (eu[0].hypot(eu[1]), ev[0].hypot(ev[1]));
         let det = (eu[0] * ev[1] - eu[1] * ev[0]).abs();
@@ -285,6 +303,9 @@ impl AffineWindow {
         for j in -(nv as i32)..=nv as i32 {
             for i in -(nu as i32)..=nu as i32 {
                 let (a, b) = (i as f64 * hu, j as f64 * hv);
+                if !keep(a, b) {
+                    continue;
+                }
                 let q = [a * eu[0] + b * ev[0], a * eu[1] + b * ev[1]];
                 samples.push((q, (-(a * a + b * b) / s2).exp()));
             }
