@@ -4,10 +4,16 @@
 //! test-error refits on the solver's previous path (one residual block per corner,
 //! no warm-up; one Ceres problem per refit). It then times the CLI's path, which
 //! calibrates the reference beside the subsets, and checks that its rows are the same.
+//! `PHASES=n` then prints, over the first n subsets, the CPU of each part of a
+//! task (each method's fit, its covariance and uncertainty figures, the test-error
+//! refit, the mapping errors) and of the reference's parts: where the time goes.
 use deformcal::app::config::{Config, ProtocolConfig};
-use deformcal::app::protocol::{plan, prepare, test_rmse};
+use deformcal::app::protocol::{plan, prepare, test_rmse, Setup, TestError};
 use deformcal::app::protocol_report::protocol_csv;
+use deformcal::model::metrics::{grid_rays, mapping_error_of, mapping_error_rot_of};
+use deformcal::solver::calibrate::{Request, SharedWarmStart};
 use deformcal::solver::problem::SolverSettings;
+use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::Instant;
 
@@ -93,6 +99,10 @@ fn main() {
         prepared_cpu + process_cpu_seconds() - before_run
     );
 
+    if let Some(n) = std::env::var("PHASES").ok().and_then(|s| s.parse().ok()) {
+        phases(&setup, n);
+    }
+
     // The CLI's path: the reference calibrated beside the subsets. With
     // PER_CORNER=1 it would calibrate the reference on the previous path too.
     if setup.settings.per_corner_blocks {
@@ -114,5 +124,84 @@ fn main() {
         beside.len(),
         t.elapsed().as_secs_f64(),
         process_cpu_seconds() - before
+    );
+}
+
+/// `PHASES=n`: the thread CPU of each part of the protocol's work over the
+/// first `n` subsets, done one after another as a task does them, and of the
+/// reference calibration's parts (its stages' solve time, its board's σ).
+fn phases(setup: &Setup, n: usize) {
+    let reference = setup.reference().expect("reference");
+    let solves: f64 = reference.stages.iter().map(|s| s.seconds).sum();
+    let c = thread_cpu_seconds();
+    let board = deformcal::app::board_json::of(reference);
+    println!(
+        "reference: {} stages, {} observations rejected; its solves {solves:.2} s wall, its board's σ {:.2} s CPU ({})",
+        reference.stages.len(),
+        reference.rejected.len(),
+        thread_cpu_seconds() - c,
+        if board.is_some_and(|b| b.correction_std.is_some()) { "computed" } else { "none" }
+    );
+    let test = TestError::new(reference, 0, &setup.settings).expect("refit");
+    let cam = &setup.header.cameras[0];
+    let truth = &setup.header.truth.as_ref().expect("truth")[0];
+    let grids = [
+        grid_rays(&reference.state.intrinsics[0], cam.width, cam.height),
+        grid_rays(truth, cam.width, cam.height),
+    ];
+    let mut cpu: BTreeMap<String, f64> = BTreeMap::new();
+    let mut timed = |what: String, f: &mut dyn FnMut()| {
+        let c = thread_cpu_seconds();
+        f();
+        *cpu.entry(what).or_default() += thread_cpu_seconds() - c;
+    };
+    for subset in setup.subsets.iter().take(n) {
+        let data = setup.dataset.subset(subset);
+        let warm = SharedWarmStart::default();
+        for method in &setup.header.methods {
+            let request = Request {
+                method: *method,
+                settings: setup.settings.clone(),
+                gauge: None,
+            };
+            let mut fitted = None;
+            // The first deformation method's fit computes the shared warm start.
+            timed(format!("fit: {method}"), &mut || {
+                fitted = Some(warm.fit(&data, &request).expect("fit"))
+            });
+            let mut c = fitted.expect("fit");
+            timed("covariance".into(), &mut || {
+                c.covariance = deformcal::solver::uncertainty::unit_covariance(&c);
+            });
+            timed("uncertainty figures from it".into(), &mut || {
+                c.assessment.uncertainty = c.uncertainty_at(c.assessment.trust.as_ref());
+            });
+            let theta = c.state.intrinsics[0];
+            timed("test-error refit".into(), &mut || {
+                test.rmse_px(&theta).expect("refit");
+            });
+            timed("mapping errors (reference, truth)".into(), &mut || {
+                for g in &grids {
+                    std::hint::black_box((
+                        mapping_error_of(g, &theta),
+                        mapping_error_rot_of(g, &theta),
+                    ));
+                }
+            });
+        }
+    }
+    let total: f64 = cpu.values().sum();
+    for (what, s) in &cpu {
+        println!(
+            "  {what}: {:.1} ms CPU per subset ({:.0} %)",
+            s / n as f64 * 1e3,
+            100.0 * s / total
+        );
+    }
+    println!(
+        "  in all {:.1} ms CPU per subset: {:.2} s for {} subsets",
+        total / n as f64 * 1e3,
+        total / n as f64 * setup.subsets.len() as f64,
+        setup.subsets.len()
     );
 }
