@@ -17,6 +17,7 @@ use crate::solver::calibrate::{fit, Calibration, Request, SharedWarmStart};
 use crate::solver::problem::SolverSettings;
 use crate::solver::select::calibrate_auto_sharing;
 use rayon::prelude::*;
+use std::borrow::Cow;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::OnceLock;
 
@@ -238,18 +239,19 @@ impl Setup {
     pub fn task(&self, t: usize) -> Row {
         self.row(
             &self.against(),
-            self.calibrate_task(t, &SharedWarmStart::default()),
+            self.calibrate_task(t, &SubsetShare::default()),
         )
     }
 
     /// The calibration of task `t`, and the part of its row that does not need
-    /// the reference calibration; `warm` is its subset's (see [`Setup::subset_groups`]).
-    fn calibrate_task(&self, t: usize, warm: &SharedWarmStart) -> Calibrated {
+    /// the reference calibration; `share` is its subset's (see [`Setup::subset_groups`]).
+    fn calibrate_task(&self, t: usize, share: &SubsetShare) -> Calibrated {
         let (subset, method, auto) = match self.header.task(t) {
             Task::Fixed(s, m) => (s, m, false),
             Task::Auto(s) => (s, Method::Standard, true),
         };
-        let data = self.dataset.subset(&self.subsets[subset]);
+        let data = share.data(subset, || self.dataset.subset(&self.subsets[subset]));
+        let warm = &share.warm;
         let mut row = Row {
             subset,
             method,
@@ -340,12 +342,12 @@ impl Setup {
         self.subset_groups(shard)
             .par_iter()
             .flat_map_iter(|group| {
-                let warm = SharedWarmStart::default();
+                let share = SubsetShare::default();
                 let against = self.against();
                 group
                     .iter()
                     .map(|&t| {
-                        let row = self.row(&against, self.calibrate_task(t, &warm));
+                        let row = self.row(&against, self.calibrate_task(t, &share));
                         tick();
                         row
                     })
@@ -431,12 +433,12 @@ impl Plan {
                 groups
                     .par_iter()
                     .flat_map_iter(|group| {
-                        let warm = SharedWarmStart::default();
+                        let share = SubsetShare::default();
                         let part = |t| {
                             if failed.load(Ordering::Relaxed) {
                                 return Part::Skipped;
                             }
-                            let c = setup.calibrate_task(t, &warm);
+                            let c = setup.calibrate_task(t, &share);
                             tick();
                             match measures.get() {
                                 Some(m) => Part::Row(setup.row(&m.against(), c)),
@@ -509,6 +511,25 @@ enum Part {
     Pending(Calibrated),
     /// Not run: the reference calibration failed.
     Skipped,
+}
+
+/// What the tasks of one subset share, one after another on one thread: its
+/// data, built once, and its warm start.
+#[derive(Default)]
+struct SubsetShare {
+    data: OnceLock<(usize, Dataset)>,
+    warm: SharedWarmStart,
+}
+
+impl SubsetShare {
+    /// Subset `subset`'s data, built by `build` the first time.
+    fn data(&self, subset: usize, build: impl Fn() -> Dataset) -> Cow<'_, Dataset> {
+        match self.data.get_or_init(|| (subset, build())) {
+            (s, data) if *s == subset => Cow::Borrowed(data),
+            // A share is one subset's; another subset's data is built apart.
+            _ => Cow::Owned(build()),
+        }
+    }
 }
 
 /// A task's calibration and the part of its row that needs no reference.

@@ -295,10 +295,12 @@ pub(super) fn spread_around_mean(h: &Header, rows: &[&Row], k: usize) -> Option<
     for (i, p) in mean.params_mut().iter_mut().enumerate() {
         *p = all.iter().map(|x| x.params()[i]).sum::<f64>() / all.len() as f64;
     }
-    let errors = all
+    // The mean's grid unprojected once, not once per subset (that was most of
+    // the time spent writing the outputs).
+    let rays = crate::model::metrics::grid_rays(&mean, cam.width, cam.height);
+    rms(all
         .iter()
-        .map(|x| crate::model::metrics::mapping_error(&mean, x, cam.width, cam.height));
-    rms(errors)
+        .map(|x| crate::model::metrics::mapping_error_of(&rays, x)))
 }
 
 /// "x.xxx (r.rr×)": an observed RMS and its ratio to the predicted one.
