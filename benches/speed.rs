@@ -264,7 +264,11 @@ fn against_saved(n: usize, method: Method, k: &deformcal::Intrinsics, w: u32, h:
         return true;
     };
     let text = std::fs::read_to_string(&path).expect("SPEED_PREVIOUS file");
-    let Some(line) = text.lines().rev().find(|l| l.starts_with(&format!("{key} "))) else {
+    let Some(line) = text
+        .lines()
+        .rev()
+        .find(|l| l.starts_with(&format!("{key} ")))
+    else {
         println!("    no previous result for {key}");
         return true;
     };
@@ -273,11 +277,16 @@ fn against_saved(n: usize, method: Method, k: &deformcal::Intrinsics, w: u32, h:
         .skip(2)
         .map(|v| v.parse().expect("a saved value"))
         .collect();
-    let previous = deformcal::Intrinsics::from_params(k.model(), &values).expect("saved intrinsics");
+    let previous =
+        deformcal::Intrinsics::from_params(k.model(), &values).expect("saved intrinsics");
     let e = mapping_error(&previous, k, w, h);
     println!(
         "    {e:.5} px from the previous build's result{}",
-        if e <= SAME_ANSWER_PX { "" } else { "  NOT THE SAME ANSWER" }
+        if e <= SAME_ANSWER_PX {
+            ""
+        } else {
+            "  NOT THE SAME ANSWER"
+        }
     );
     e <= SAME_ANSWER_PX
 }

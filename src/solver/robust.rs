@@ -555,7 +555,8 @@ fn pick_round(dataset: &Dataset, residuals: &[f64], k: f64) -> Vec<usize> {
             keep[i] = false;
         }
         let mut flags = keep.iter();
-        left.observations.retain(|_| *flags.next().expect("one flag each"));
+        left.observations
+            .retain(|_| *flags.next().expect("one flag each"));
         let mut flags = keep.iter();
         index.retain(|_| *flags.next().expect("one flag each"));
         let mut pairs = keep.iter().flat_map(|&k| [k, k]);
