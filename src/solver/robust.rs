@@ -484,15 +484,28 @@ fn within_reach(corner: usize, target: &crate::model::target::Target) -> Vec<usi
 /// Which observations to reject this round: those whose residual stands out from
 /// their neighbours' by more than k·σ (σ of that local deviation, robustly),
 /// worst first, as long as their view keeps enough corners for a
-/// homography. A corner within reach of one rejected this round waits for the
-/// next round, since the outlier's residual is part of its own comparison.
+/// homography. A corner within reach of one picked here waits for the next
+/// pass ([`pick_round`]), since the outlier's residual is part of its own
+/// comparison. One pass, the unit of [`pick_round`] (which the tests check it by).
+#[cfg(test)]
 fn pick_outliers(dataset: &Dataset, residuals: &[f64], k: f64) -> Vec<usize> {
     // In units of each corner's own noise: a corner the refinement found
     // uncertain is not an outlier for being as far off as its σ says.
     let deviations = local_deviations(dataset, &crate::model::trust::weighted(dataset, residuals));
+    select_outliers(dataset, &deviations, &[], k)
+}
+
+/// [`pick_outliers`] from the observations' local deviations, among those not
+/// `removed` (all when it is empty).
+fn select_outliers(dataset: &Dataset, deviations: &[f64], removed: &[bool], k: f64) -> Vec<usize> {
+    let kept = |i: usize| removed.is_empty() || !removed[i];
+    let left: Vec<f64> = (0..deviations.len())
+        .filter(|&i| kept(i))
+        .map(|i| deviations[i])
+        .collect();
     // Each deviation is the larger of two |coordinates|: for Gaussian noise of
     // σ_d per coordinate its median is 1.052·σ_d (P(|x| < t)² = ½).
-    let sigma = robust_sigma(&deviations) / 1.4826 / 1.052;
+    let sigma = robust_sigma(&left) / 1.4826 / 1.052;
     if sigma <= 0.0 {
         return Vec::new();
     }
@@ -500,14 +513,16 @@ fn pick_outliers(dataset: &Dataset, residuals: &[f64], k: f64) -> Vec<usize> {
     // observation in every round).
     let frames = dataset.num_frames();
     let mut per_view = vec![0usize; dataset.cameras.len() * frames];
-    for o in &dataset.observations {
-        per_view[o.camera * frames + o.frame] += 1;
+    for (i, o) in dataset.observations.iter().enumerate() {
+        if kept(i) {
+            per_view[o.camera * frames + o.frame] += 1;
+        }
     }
     let mut worst: Vec<(usize, f64)> = deviations
         .iter()
         .enumerate()
         .map(|(i, &e)| (i, e))
-        .filter(|&(_, e)| e > k * sigma)
+        .filter(|&(i, e)| kept(i) && e > k * sigma)
         .collect();
     worst.sort_by(|a, b| b.1.total_cmp(&a.1));
     let mut taken: std::collections::HashSet<(usize, usize, usize)> = Default::default();
@@ -531,37 +546,49 @@ fn pick_outliers(dataset: &Dataset, residuals: &[f64], k: f64) -> Vec<usize> {
     out
 }
 
-/// Which observations to reject this round: [`pick_outliers`], then again on
-/// the residuals without those picked until it picks none. A corner that waited
-/// for an outlier within its reach is so judged in the same round, without the
+/// Which observations to reject this round: [`pick_outliers`], then again
+/// without those picked until it picks none. A corner that waited for an
+/// outlier within its reach is so judged in the same round, without the
 /// outlier, rather than after a re-solve: dropping a few corners among
 /// thousands barely moves the others' residuals, while each re-solve costs
 /// Jacobians and linear solves over all the data (at 10 000 `t2` images
-/// `full` took a second round for them: 8 s of 30).
+/// `full` took a second round for them: 11 s of 31). Only the views that lost
+/// a corner are compared again; the others' deviations stay as they were.
 fn pick_round(dataset: &Dataset, residuals: &[f64], k: f64) -> Vec<usize> {
-    let mut picked = pick_outliers(dataset, residuals, k);
-    if picked.is_empty() {
-        return picked;
-    }
+    let weighted = crate::model::trust::weighted(dataset, residuals);
+    let mut deviations = local_deviations(dataset, &weighted);
+    let mut removed = vec![false; deviations.len()];
+    let mut picked = select_outliers(dataset, &deviations, &[], k);
     let mut all = Vec::new();
-    // The observations left, their residuals and their indices in `dataset`.
-    let mut left = dataset.clone();
-    let mut left_residuals = residuals.to_vec();
-    let mut index: Vec<usize> = (0..dataset.observations.len()).collect();
     while !picked.is_empty() {
-        all.extend(picked.iter().map(|&i| index[i]));
-        let mut keep = vec![true; index.len()];
+        let mut touched = std::collections::HashSet::new();
         for &i in &picked {
-            keep[i] = false;
+            removed[i] = true;
+            let o = &dataset.observations[i];
+            touched.insert((o.camera, o.frame));
         }
-        let mut flags = keep.iter();
-        left.observations
-            .retain(|_| *flags.next().expect("one flag each"));
-        let mut flags = keep.iter();
-        index.retain(|_| *flags.next().expect("one flag each"));
-        let mut pairs = keep.iter().flat_map(|&k| [k, k]);
-        left_residuals.retain(|_| pairs.next().expect("two flags each"));
-        picked = pick_outliers(&left, &left_residuals, k);
+        all.append(&mut picked);
+        // The touched views without what was removed, and where each came from.
+        let index: Vec<usize> = (0..removed.len())
+            .filter(|&i| {
+                let o = &dataset.observations[i];
+                !removed[i] && touched.contains(&(o.camera, o.frame))
+            })
+            .collect();
+        let views = Dataset {
+            target: dataset.target,
+            cameras: dataset.cameras.clone(),
+            frame_ids: dataset.frame_ids.clone(),
+            observations: index.iter().map(|&i| dataset.observations[i]).collect(),
+        };
+        let r: Vec<f64> = index
+            .iter()
+            .flat_map(|&i| [weighted[2 * i], weighted[2 * i + 1]])
+            .collect();
+        for (&i, d) in index.iter().zip(local_deviations(&views, &r)) {
+            deviations[i] = d;
+        }
+        picked = select_outliers(dataset, &deviations, &removed, k);
     }
     all.sort_unstable();
     all

@@ -219,6 +219,60 @@ fn a_round_takes_the_outlier_that_waited_for_its_neighbour() {
     expected.sort_unstable();
     assert_eq!(round, expected);
     assert!(round.len() <= planted.len() + 1, "{round:?}");
+    assert_eq!(round, round_by_passes(&d, &residuals, 4.0));
+}
+
+/// [`pick_round`] written out: whole passes of [`pick_outliers`] over the data
+/// left, as the reference of its update of the touched views only.
+fn round_by_passes(d: &Dataset, residuals: &[f64], k: f64) -> Vec<usize> {
+    let mut index: Vec<usize> = (0..d.observations.len()).collect();
+    let mut all = Vec::new();
+    loop {
+        let mut left = d.clone();
+        left.observations = index.iter().map(|&i| d.observations[i]).collect();
+        let r: Vec<f64> = index
+            .iter()
+            .flat_map(|&i| [residuals[2 * i], residuals[2 * i + 1]])
+            .collect();
+        let picked = pick_outliers(&left, &r, k);
+        if picked.is_empty() {
+            break;
+        }
+        all.extend(picked.iter().map(|&j| index[j]));
+        index = (0..index.len())
+            .filter(|j| !picked.contains(j))
+            .map(|j| index[j])
+            .collect();
+    }
+    all.sort_unstable();
+    all
+}
+
+/// On noise with outliers spread over many views, a round equals its passes
+/// written out.
+#[test]
+fn a_round_equals_its_passes() {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(21);
+    let target = Target {
+        rows: 6,
+        cols: 8,
+        spacing: 0.05,
+    };
+    let cameras = vec![CameraSpec::new("a", 640, 480, Default::default())];
+    let rows = (0..40).flat_map(|frame| (0..48).map(move |corner| (0, frame, corner, [0.0, 0.0])));
+    let d = Dataset::from_keyed(target, cameras, rows);
+    let mut residuals: Vec<f64> = (0..2 * d.observations.len())
+        .map(|_| rng.sample(rand_distr::Normal::new(0.0, 0.1).unwrap()))
+        .collect();
+    // Clusters of outliers, neighbours included, in a fifth of the views.
+    for i in 0..d.observations.len() {
+        if d.observations[i].frame % 5 == 0 && rng.gen_bool(0.1) {
+            residuals[2 * i] += rng.gen_range(0.6..3.0);
+        }
+    }
+    let round = pick_round(&d, &residuals, 4.0);
+    assert!(round.len() > pick_outliers(&d, &residuals, 4.0).len());
+    assert_eq!(round, round_by_passes(&d, &residuals, 4.0));
 }
 
 /// A re-solve that settles after its step (`Problem::resolve`) keeps the answer
