@@ -266,7 +266,7 @@ fn a_round_equals_its_passes() {
         .collect();
     // Clusters of outliers, neighbours included, in a fifth of the views.
     for i in 0..d.observations.len() {
-        if d.observations[i].frame % 5 == 0 && rng.gen_bool(0.1) {
+        if d.observations[i].frame.is_multiple_of(5) && rng.gen_bool(0.1) {
             residuals[2 * i] += rng.gen_range(0.6..3.0);
         }
     }
