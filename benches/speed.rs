@@ -22,7 +22,11 @@
 //! that rejected observations is checked against the previous pipeline's
 //! answer, the kept observations fitted afresh (within 0.01 px, the run fails
 //! otherwise); `SPEED_DIAG=1` lists each result's stages, `SPEED_VERBOSE=1`
-//! prints Ceres' iterations and its timing report.
+//! prints Ceres' iterations and its timing report. `SPEED_SAVE=file` appends
+//! each result's intrinsics to `file`, and `SPEED_PREVIOUS=file` prints each
+//! result's mapping error to the same size and method there (a run of another
+//! build), failing beyond 0.01 px: a change of the solver path must not move
+//! the answer.
 use deformcal::model::metrics::mapping_error;
 use deformcal::model::synthetic::{Generator, Preset};
 use deformcal::solver::problem::SolverSettings;
@@ -209,6 +213,8 @@ fn growth(sizes: &[usize], methods: &[Method]) -> bool {
                     );
                 }
             }
+            let cam = &dataset.cameras[0];
+            ok &= against_saved(n, method, &c.state.intrinsics[0], cam.width, cam.height);
             if !c.rejected.is_empty() {
                 // Only what the check needs is kept (peak memory).
                 let (kept_data, intrinsics, rejected) =
@@ -218,7 +224,6 @@ fn growth(sizes: &[usize], methods: &[Method]) -> bool {
                 let mut kept = request(method, false);
                 kept.settings.outlier_k = 0.0;
                 let fresh = deformcal::solver::calibrate::fit(&kept_data, &kept).expect("fit");
-                let cam = &dataset.cameras[0];
                 let e = mapping_error(
                     &fresh.state.intrinsics[0],
                     &intrinsics,
@@ -239,6 +244,51 @@ fn growth(sizes: &[usize], methods: &[Method]) -> bool {
         }
     }
     ok
+}
+
+/// Appends this result to `SPEED_SAVE`, and compares it with the same size and
+/// method in `SPEED_PREVIOUS` (see the module's comment); false if too far.
+fn against_saved(n: usize, method: Method, k: &deformcal::Intrinsics, w: u32, h: u32) -> bool {
+    let key = format!("{n} {}", method.name());
+    if let Ok(path) = std::env::var("SPEED_SAVE") {
+        use std::io::Write;
+        let values: Vec<String> = k.params().iter().map(|v| format!("{v:e}")).collect();
+        let mut f = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&path)
+            .expect("SPEED_SAVE file");
+        writeln!(f, "{key} {}", values.join(" ")).expect("SPEED_SAVE write");
+    }
+    let Ok(path) = std::env::var("SPEED_PREVIOUS") else {
+        return true;
+    };
+    let text = std::fs::read_to_string(&path).expect("SPEED_PREVIOUS file");
+    let Some(line) = text
+        .lines()
+        .rev()
+        .find(|l| l.starts_with(&format!("{key} ")))
+    else {
+        println!("    no previous result for {key}");
+        return true;
+    };
+    let values: Vec<f64> = line
+        .split_whitespace()
+        .skip(2)
+        .map(|v| v.parse().expect("a saved value"))
+        .collect();
+    let previous =
+        deformcal::Intrinsics::from_params(k.model(), &values).expect("saved intrinsics");
+    let e = mapping_error(&previous, k, w, h);
+    println!(
+        "    {e:.5} px from the previous build's result{}",
+        if e <= SAME_ANSWER_PX {
+            ""
+        } else {
+            "  NOT THE SAME ANSWER"
+        }
+    );
+    e <= SAME_ANSWER_PX
 }
 
 fn main() {

@@ -130,11 +130,14 @@ SolveReport solve(ProblemData& data, const SolveOptions& options) {
     *a.loss_scale_factor = 1.0;
     if (options.verbose) std::fprintf(stderr, "  with the loss:\n");
   }
+  SettleAfterStep settle(options.settle_cost_change);
+  if (options.settle_cost_change > 0.0) s.callbacks.push_back(&settle);
   ceres::Solve(s, a.problem.get(), &summary);
 
   SolveReport report;
   report.usable = summary.IsSolutionUsable();
-  report.converged = summary.termination_type == ceres::CONVERGENCE;
+  report.converged = summary.termination_type == ceres::CONVERGENCE ||
+                     summary.termination_type == ceres::USER_SUCCESS;
   report.iterations = static_cast<int32_t>(summary.iterations.size()) - 1 + warm_up_iterations;
   report.initial_cost = summary.initial_cost;
   report.final_cost = summary.final_cost;

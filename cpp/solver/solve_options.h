@@ -6,6 +6,7 @@
 #include <ceres/ceres.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <memory>
 #include <vector>
@@ -83,6 +84,26 @@ class StderrProgress : public ceres::IterationCallback {
                  1e3 * s.cumulative_time_in_seconds);
     return ceres::SOLVER_CONTINUE;
   }
+};
+
+// Stops a solve that starts next to its optimum after a successful step that
+// changed the cost by at most `fraction` of it.  Ceres' tolerance tests refuse
+// the step they test, so a solve that stops on them has computed one step more
+// than it keeps: for a re-solve after outlier rejection, whose first step lands
+// on the optimum, a second Jacobian and linear solve for nothing.  Here the
+// step is kept and no further one computed: the same answer as that solve's.
+class SettleAfterStep : public ceres::IterationCallback {
+ public:
+  explicit SettleAfterStep(double fraction) : fraction_(fraction) {}
+  ceres::CallbackReturnType operator()(const ceres::IterationSummary& s) override {
+    if (s.iteration > 0 && s.step_is_successful && std::abs(s.cost_change) <= fraction_ * s.cost) {
+      return ceres::SOLVER_TERMINATE_SUCCESSFULLY;
+    }
+    return ceres::SOLVER_CONTINUE;
+  }
+
+ private:
+  double fraction_;
 };
 
 // Relative tolerances of the warm-up: it only needs to come close.

@@ -152,6 +152,9 @@ void Validate(const ffi::ProblemData& d, const ffi::SolveOptions& o) {
       !(o.gradient_tolerance >= 0.0)) {
     Fail("solver tolerances must be non-negative numbers");
   }
+  if (!(o.settle_cost_change >= 0.0)) {
+    Fail("settle_cost_change must be a non-negative number");
+  }
 }
 
 // Validates the problem data before anything reads through its offsets.

@@ -95,6 +95,11 @@ pub mod ffi {
         warm_up_share: f64,
         /// The warm-up's loss scale as a multiple of `loss_scale_px` (0: no loss).
         warm_up_scale_factor: f64,
+        /// A solve that starts next to its optimum (a re-solve after outlier
+        /// rejection) stops, converged, after a successful step that changed
+        /// the cost by at most this fraction of it, without the linear solve
+        /// whose step the tolerances would refuse (0: off).
+        settle_cost_change: f64,
     }
 
     /// What Ceres reported about one solve.

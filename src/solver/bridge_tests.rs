@@ -18,6 +18,7 @@ fn options() -> SolveOptions {
         per_corner_blocks: false,
         compress_view_rows: true,
         warm_up_share: 0.5,
+        settle_cost_change: 0.0,
         warm_up_scale_factor: 0.0,
     }
 }

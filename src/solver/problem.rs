@@ -174,6 +174,7 @@ impl SolverSettings {
             compress_view_rows: self.compress_view_rows,
             warm_up_share: self.warm_up.share,
             warm_up_scale_factor: self.warm_up.scale_factor,
+            settle_cost_change: 0.0,
         }
     }
 }
@@ -424,13 +425,38 @@ impl Problem<'_> {
 
     /// Refines `state` in place; an unusable solve is an error, a non-converged one is reported.
     pub fn solve(&self, state: &mut State, settings: &SolverSettings) -> Result<SolveReport> {
+        self.solve_settling(state, settings, 0.0)
+    }
+
+    /// [`Problem::solve`] from next to the optimum (a re-solve after outlier
+    /// rejection): it stops, converged, after a successful step that changed
+    /// the cost by at most `settle` of it (see `SolveOptions::settle_cost_change`).
+    pub fn resolve(
+        &self,
+        state: &mut State,
+        settings: &SolverSettings,
+        settle: f64,
+    ) -> Result<SolveReport> {
+        self.solve_settling(state, settings, settle)
+    }
+
+    fn solve_settling(
+        &self,
+        state: &mut State,
+        settings: &SolverSettings,
+        settle: f64,
+    ) -> Result<SolveReport> {
         let what = format!("{} method", self.method);
         let settings = SolverSettings {
             function_tolerance: settings.function_tolerance
                 * self.method.info().function_tolerance_scale,
             ..settings.clone()
         };
-        self.run(state, &settings, ffi::solve, &what)
+        let options = SolveOptions {
+            settle_cost_change: settle,
+            ..settings.options()
+        };
+        self.run(state, &settings, options, ffi::solve, &what)
     }
 
     /// The same as [`Problem::solve`] for a pose-only refit (everything but the
@@ -438,7 +464,13 @@ impl Problem<'_> {
     /// solved on its own to round-off, without a Ceres problem; several times faster.
     /// Other problems are refused.
     pub fn refit_poses(&self, state: &mut State, settings: &SolverSettings) -> Result<SolveReport> {
-        self.run(state, settings, ffi::refit_poses, "the pose refit")
+        self.run(
+            state,
+            settings,
+            settings.options(),
+            ffi::refit_poses,
+            "the pose refit",
+        )
     }
 
     /// Prepares [`Problem::refit_poses`] from `state` for refits under many
@@ -461,6 +493,7 @@ impl Problem<'_> {
         &self,
         state: &mut State,
         settings: &SolverSettings,
+        options: SolveOptions,
         solver: fn(
             &mut ProblemData,
             &SolveOptions,
@@ -469,7 +502,7 @@ impl Problem<'_> {
     ) -> Result<SolveReport> {
         let layout = self.layout();
         let mut data = self.data(state, &layout, settings)?;
-        let mut report = solver(&mut data, &settings.options()).map_err(|e| {
+        let mut report = solver(&mut data, &options).map_err(|e| {
             Error::Problem(format!(
                 "{}{}",
                 e.what(),

@@ -257,6 +257,16 @@ pub struct Rejected {
 /// this bounds the work, not the answer (it is stable long before).
 const MAX_REJECTION_ROUNDS: usize = 10;
 
+/// A re-solve after a rejection stops after a successful step that changed
+/// the cost by at most this fraction of it. It starts next to its optimum,
+/// which its first Gauss-Newton step reaches: Ceres' tolerances then refused a
+/// second step, computed only to be refused, which left the answer where the
+/// first had put it, at the price of a Jacobian and a linear solve (`full`,
+/// 1 600 `t2` images: 0.5 s of 3.2). That first step changes the cost by about
+/// 3e-5 of it (`cargo bench --bench speed -- growth`, `SPEED_VERBOSE=1`); a
+/// larger change is followed by more steps, as before.
+const SETTLE_COST_CHANGE: f64 = 1e-4;
+
 /// Share of rejected observations above which the data are called unreliable.
 pub const WARN_REJECTED_FRACTION: f64 = 0.1;
 
@@ -474,15 +484,28 @@ fn within_reach(corner: usize, target: &crate::model::target::Target) -> Vec<usi
 /// Which observations to reject this round: those whose residual stands out from
 /// their neighbours' by more than k·σ (σ of that local deviation, robustly),
 /// worst first, as long as their view keeps enough corners for a
-/// homography. A corner within reach of one rejected this round waits for the
-/// next round, since the outlier's residual is part of its own comparison.
+/// homography. A corner within reach of one picked here waits for the next
+/// pass ([`pick_round`]), since the outlier's residual is part of its own
+/// comparison. One pass, the unit of [`pick_round`] (which the tests check it by).
+#[cfg(test)]
 fn pick_outliers(dataset: &Dataset, residuals: &[f64], k: f64) -> Vec<usize> {
     // In units of each corner's own noise: a corner the refinement found
     // uncertain is not an outlier for being as far off as its σ says.
     let deviations = local_deviations(dataset, &crate::model::trust::weighted(dataset, residuals));
+    select_outliers(dataset, &deviations, &[], k)
+}
+
+/// [`pick_outliers`] from the observations' local deviations, among those not
+/// `removed` (all when it is empty).
+fn select_outliers(dataset: &Dataset, deviations: &[f64], removed: &[bool], k: f64) -> Vec<usize> {
+    let kept = |i: usize| removed.is_empty() || !removed[i];
+    let left: Vec<f64> = (0..deviations.len())
+        .filter(|&i| kept(i))
+        .map(|i| deviations[i])
+        .collect();
     // Each deviation is the larger of two |coordinates|: for Gaussian noise of
     // σ_d per coordinate its median is 1.052·σ_d (P(|x| < t)² = ½).
-    let sigma = robust_sigma(&deviations) / 1.4826 / 1.052;
+    let sigma = robust_sigma(&left) / 1.4826 / 1.052;
     if sigma <= 0.0 {
         return Vec::new();
     }
@@ -490,14 +513,16 @@ fn pick_outliers(dataset: &Dataset, residuals: &[f64], k: f64) -> Vec<usize> {
     // observation in every round).
     let frames = dataset.num_frames();
     let mut per_view = vec![0usize; dataset.cameras.len() * frames];
-    for o in &dataset.observations {
-        per_view[o.camera * frames + o.frame] += 1;
+    for (i, o) in dataset.observations.iter().enumerate() {
+        if kept(i) {
+            per_view[o.camera * frames + o.frame] += 1;
+        }
     }
     let mut worst: Vec<(usize, f64)> = deviations
         .iter()
         .enumerate()
         .map(|(i, &e)| (i, e))
-        .filter(|&(_, e)| e > k * sigma)
+        .filter(|&(i, e)| kept(i) && e > k * sigma)
         .collect();
     worst.sort_by(|a, b| b.1.total_cmp(&a.1));
     let mut taken: std::collections::HashSet<(usize, usize, usize)> = Default::default();
@@ -519,6 +544,54 @@ fn pick_outliers(dataset: &Dataset, residuals: &[f64], k: f64) -> Vec<usize> {
     }
     out.sort_unstable();
     out
+}
+
+/// Which observations to reject this round: [`pick_outliers`], then again
+/// without those picked until it picks none. A corner that waited for an
+/// outlier within its reach is so judged in the same round, without the
+/// outlier, rather than after a re-solve: dropping a few corners among
+/// thousands barely moves the others' residuals, while each re-solve costs
+/// Jacobians and linear solves over all the data (at 10 000 `t2` images
+/// `full` took a second round for them: 11 s of 31). Only the views that lost
+/// a corner are compared again; the others' deviations stay as they were.
+fn pick_round(dataset: &Dataset, residuals: &[f64], k: f64) -> Vec<usize> {
+    let weighted = crate::model::trust::weighted(dataset, residuals);
+    let mut deviations = local_deviations(dataset, &weighted);
+    let mut removed = vec![false; deviations.len()];
+    let mut picked = select_outliers(dataset, &deviations, &[], k);
+    let mut all = Vec::new();
+    while !picked.is_empty() {
+        let mut touched = std::collections::HashSet::new();
+        for &i in &picked {
+            removed[i] = true;
+            let o = &dataset.observations[i];
+            touched.insert((o.camera, o.frame));
+        }
+        all.append(&mut picked);
+        // The touched views without what was removed, and where each came from.
+        let index: Vec<usize> = (0..removed.len())
+            .filter(|&i| {
+                let o = &dataset.observations[i];
+                !removed[i] && touched.contains(&(o.camera, o.frame))
+            })
+            .collect();
+        let views = Dataset {
+            target: dataset.target,
+            cameras: dataset.cameras.clone(),
+            frame_ids: dataset.frame_ids.clone(),
+            observations: index.iter().map(|&i| dataset.observations[i]).collect(),
+        };
+        let r: Vec<f64> = index
+            .iter()
+            .flat_map(|&i| [weighted[2 * i], weighted[2 * i + 1]])
+            .collect();
+        for (&i, d) in index.iter().zip(local_deviations(&views, &r)) {
+            deviations[i] = d;
+        }
+        picked = select_outliers(dataset, &deviations, &removed, k);
+    }
+    all.sort_unstable();
+    all
 }
 
 /// Corners a view keeps at least (a homography needs four; the pipeline's
@@ -546,7 +619,7 @@ pub fn reject_outliers(
         return Ok(out);
     }
     for _ in 0..MAX_REJECTION_ROUNDS {
-        let drop = pick_outliers(&dataset, &out.residuals, settings.outlier_k);
+        let drop = pick_round(&dataset, &out.residuals, settings.outlier_k);
         if drop.is_empty() {
             break;
         }
@@ -579,7 +652,7 @@ pub fn reject_outliers(
             frozen: frozen.clone(),
             hold: problem.hold,
         };
-        let report = p.solve(state, settings)?;
+        let report = p.resolve(state, settings, SETTLE_COST_CHANGE)?;
         check_stage(problem.method, &report, false)?;
         out.residuals = report.residuals.clone();
         out.frozen = frozen;
