@@ -38,6 +38,10 @@ pub struct IntrinsicsCovariance {
     pub free: Vec<bool>,
     /// n × n over the lens parameters, in their units squared per px².
     pub unit: DMatrix<f64>,
+    /// Whether the board's static corrections stayed in the dense reduced
+    /// system this was computed with (then that system gives their σ too); false
+    /// when they were eliminated first or the problem has none free.
+    pub corrections_kept: bool,
 }
 
 /// A camera's uncertainty figures at a given noise (docs/conventions.md §3a, §5).

@@ -496,7 +496,25 @@ pub fn unit_covariance(
         .collect();
     let x = solve_columns(&n, &scale, &targets);
     let sigma = sandwich(&e, &weights, &x, targets.len());
-    Ok(per_camera(&layout, &n.params, &targets, &sigma))
+    let mut out = per_camera(&layout, &n.params, &targets, &sigma);
+    let kept = corrections_kept(&n, &layout);
+    out.iter_mut().for_each(|c| c.corrections_kept = kept);
+    Ok(out)
+}
+
+/// Whether the normal matrix has free static corrections, all of them kept in
+/// its dense system (what [`unit_correction_std`] needs).
+fn corrections_kept(n: &Normal, layout: &Layout) -> bool {
+    let mut any = false;
+    for (&param, role) in n.params.iter().zip(&n.roles) {
+        if param >= layout.corrections {
+            if !matches!(role, Role::Kept(_)) {
+                return false;
+            }
+            any = true;
+        }
+    }
+    any
 }
 
 /// (WJX)ᵀ(WJX), t × t, with X given per Jacobian column (t values each).
@@ -538,6 +556,7 @@ fn per_camera(
             let mut cov = IntrinsicsCovariance {
                 free: vec![false; np],
                 unit: DMatrix::zeros(np, np),
+                corrections_kept: false,
             };
             let local = |u: usize| params[targets[u]].checked_sub(offset).filter(|&i| i < np);
             for a in 0..targets.len() {
@@ -570,11 +589,7 @@ pub fn unit_correction_std(
     let targets: Vec<usize> = (0..n.params.len())
         .filter(|&col| n.params[col] >= layout.corrections)
         .collect();
-    if targets.is_empty()
-        || targets
-            .iter()
-            .any(|&c| !matches!(n.roles[c], Role::Kept(_)))
-    {
+    if !corrections_kept(&n, &layout) {
         return Err(UncertaintyError::Jacobian(
             "the corrections are not determined well enough for a covariance".into(),
         ));
