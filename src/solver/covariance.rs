@@ -458,9 +458,29 @@ fn weighted_normal(
     settings: &SolverSettings,
     eliminate: Eliminate,
 ) -> Result<(Evaluation, Vec<f64>, Normal), UncertaintyError> {
-    let e = problem
+    let e = jacobian(problem, state, settings)?;
+    let (weights, n) = weighted_normal_of(&e, problem, settings, eliminate)?;
+    Ok((e, weights, n))
+}
+
+/// The Jacobian of `problem` at `state`, as this module's error.
+pub fn jacobian(
+    problem: &Problem,
+    state: &State,
+    settings: &SolverSettings,
+) -> Result<Evaluation, UncertaintyError> {
+    problem
         .jacobian(state, settings)
-        .map_err(|e| UncertaintyError::Jacobian(e.to_string()))?;
+        .map_err(|e| UncertaintyError::Jacobian(e.to_string()))
+}
+
+/// [`weighted_normal`] from a Jacobian already evaluated.
+fn weighted_normal_of(
+    e: &Evaluation,
+    problem: &Problem,
+    settings: &SolverSettings,
+    eliminate: Eliminate,
+) -> Result<(Vec<f64>, Normal), UncertaintyError> {
     let rows = 2 * problem.dataset.observations.len();
     if e.jacobian_rows != rows
         || e.jacobian_row_ptr.len() != rows + 1
@@ -474,9 +494,9 @@ fn weighted_normal(
         )));
     }
     let weights = loss_weights(problem.dataset, settings, &e.residuals);
-    let mut n = normal_matrix(&e, &problem.layout(), &weights, eliminate)?;
+    let mut n = normal_matrix(e, &problem.layout(), &weights, eliminate)?;
     add_lens_prior(&mut n, &problem.lens_prior_weights(settings));
-    Ok((e, weights, n))
+    Ok((weights, n))
 }
 
 /// Σ_θ of every camera at unit noise, from the Jacobian of `problem` at `state`
@@ -635,9 +655,18 @@ pub fn unit_correction_information(
     state: &State,
     settings: &SolverSettings,
 ) -> Result<(Vec<usize>, DMatrix<f64>), UncertaintyError> {
+    unit_correction_information_of(&jacobian(problem, state, settings)?, problem, settings)
+}
+
+/// [`unit_correction_information`] from the Jacobian [`jacobian`] gave.
+pub fn unit_correction_information_of(
+    e: &Evaluation,
+    problem: &Problem,
+    settings: &SolverSettings,
+) -> Result<(Vec<usize>, DMatrix<f64>), UncertaintyError> {
     let d = problem.dataset;
     let layout = problem.layout();
-    let (_, _, mut n) = weighted_normal(problem, state, settings, Eliminate::Frames)?;
+    let (_, mut n) = weighted_normal_of(e, problem, settings, Eliminate::Frames)?;
     let scale = jacobi_scale(d, &layout, &mut n)?;
     schur(d, &layout, &mut n)?;
     let (c, o): (Vec<usize>, Vec<usize>) =
