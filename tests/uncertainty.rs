@@ -202,6 +202,35 @@ fn without_the_gauge_the_covariance_is_refused() {
 }
 
 #[test]
+fn board_json_takes_the_corrections_sigma_only_where_the_normal_matrix_keeps_them() {
+    // board.json skips building the normal matrix again when the calibration's
+    // covariance says it eliminated the corrections (25 images): computing it
+    // afresh then gives nothing either. With 100 images it keeps them, and
+    // board.json's σ is the afresh computation's, bit for bit.
+    use deformcal::app::board_json;
+    use deformcal::solver::covariance::unit_correction_std;
+    for (images, kept) in [(25, false), (100, true)] {
+        let (d, _) = common::data(Preset::T2, images, 34, 1.0, 1.0);
+        let c = common::run(&d, Method::Static, deformcal::solver::problem::Loss::Cauchy);
+        let cov = c.covariance.as_ref().unwrap();
+        assert_eq!(cov[0].corrections_kept, kept, "{images} images");
+        let fresh = unit_correction_std(&c.problem(), &c.state, &c.settings);
+        let written = board_json::of(&c).unwrap().correction_std;
+        match (fresh, written) {
+            (Err(_), None) => assert!(!kept),
+            (Ok(unit), Some(std)) => {
+                assert!(kept);
+                let noise = c.assessment.trust.unwrap().noise_px;
+                let expected: Vec<[f64; 3]> = unit.iter().map(|s| s.map(|v| v * noise)).collect();
+                assert_eq!(std, expected);
+                assert!(std.iter().flatten().any(|&v| v > 0.0));
+            }
+            (fresh, written) => panic!("{images} images: {fresh:?} against {written:?}"),
+        }
+    }
+}
+
+#[test]
 fn every_lens_model_has_a_covariance() {
     // The rational model's k4–k6 nearly trade off against k1–k3: weak, not missing.
     for model in LensModel::ALL {

@@ -15,16 +15,17 @@ use crate::app::calibration_json::CalibrationJson;
 use crate::error::{Error, Result};
 use crate::model::dataset::Dataset;
 use crate::model::lens::Intrinsics;
+use crate::model::lens::MAX_PARAMS;
 use crate::model::pose::Pose;
 use crate::model::target::Target;
 use crate::model::uncertainty::{
-    mapping_forms, projection_jacobian, projection_uncertainty_map, UncertaintyMap,
+    jacobian_rows, mapping_forms, projection_uncertainty_map, UncertaintyMap,
 };
 use nalgebra::{DMatrix, Rotation3, Vector2, Vector3};
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
-/// Step of the central differences in the view's pose (radians, metres).
+/// Step of the central differences in the point's position, metres.
 const POSE_STEP: f64 = 1e-6;
 /// Least share of the board's corners a candidate must show (partial views count).
 const MIN_VISIBLE: f64 = 0.5;
@@ -130,19 +131,34 @@ pub fn view_information(
     let idx = free_indices(free);
     let n = idx.len();
     let m = n + 6;
+    // Accumulated in place, one triangle, from rows on the stack: the report
+    // asks this of about 200 candidate views of up to a whole board each.
     let mut a = DMatrix::<f64>::zeros(m, m);
+    let mut rows = [[0.0; MAX_PARAMS + 6]; 2];
     let mut used = 0;
+    // `Pose::transform`'s arithmetic, its rotation made once per view.
+    let (r, t) = (
+        camera_from_board.rotation_matrix(),
+        camera_from_board.translation_vector(),
+    );
     for &c in corners {
-        let xc = camera_from_board.transform(&target.nominal(c));
-        let Some(j) = view_jacobian(k, &idx, &xc) else {
+        let xc = r * target.nominal(c) + t;
+        if view_jacobian(k, &idx, &xc, &mut rows).is_none() {
             continue;
-        };
-        a += j.transpose() * &j;
+        }
+        let [r0, r1] = &rows;
+        for (q, column) in a.as_mut_slice().chunks_exact_mut(m).enumerate() {
+            let (x0, x1) = (r0[q], r1[q]);
+            for ((v, y0), y1) in column[q..].iter_mut().zip(&r0[q..m]).zip(&r1[q..m]) {
+                *v += y0 * x0 + y1 * x1;
+            }
+        }
         used += 1;
     }
     if used == 0 {
         return None;
     }
+    a.fill_upper_triangle_with_lower_triangle();
     let aa = a.view((0, 0), (n, n)).into_owned();
     let ab = a.view((0, n), (n, 6)).into_owned();
     let bb = a.view((n, n), (6, 6)).into_owned();
@@ -150,34 +166,38 @@ pub fn view_information(
     Some(&aa - &ab * bb_inv * ab.transpose())
 }
 
-/// 2 × (free + 6) Jacobian of a corner's projection: the free intrinsics, then
-/// a small rotation and translation of the point in the camera frame (any full
-/// parameterisation of the pose gives the same Schur complement).
-fn view_jacobian(k: &Intrinsics, idx: &[usize], xc: &Vector3<f64>) -> Option<DMatrix<f64>> {
-    k.project(xc)?;
-    let jt = projection_jacobian(k, xc)?;
+/// The 2 × (free + 6) Jacobian of a corner's projection into `rows`: the free
+/// intrinsics, then a small rotation and translation of the point in the camera
+/// frame (any full parameterisation of the pose gives the same Schur complement).
+/// The translation's columns are ∂uv/∂x_c by central differences, the
+/// rotation's follow from them by the chain rule: ∂uv/∂ω_a = ∂uv/∂x_c (e_a × x_c).
+fn view_jacobian(
+    k: &Intrinsics,
+    idx: &[usize],
+    xc: &Vector3<f64>,
+    rows: &mut [[f64; MAX_PARAMS + 6]; 2],
+) -> Option<()> {
+    let jt = jacobian_rows(k, xc)?;
     let n = idx.len();
-    let mut j = DMatrix::zeros(2, n + 6);
     for (col, &i) in idx.iter().enumerate() {
-        j[(0, col)] = jt[(0, i)];
-        j[(1, col)] = jt[(1, i)];
+        rows[0][col] = jt[0][i];
+        rows[1][col] = jt[1][i];
     }
-    for a in 0..6 {
+    let mut dx = [Vector2::zeros(); 3];
+    for (a, column) in dx.iter_mut().enumerate() {
         let mut d = Vector3::zeros();
-        d[a % 3] = POSE_STEP;
-        let (plus, minus) = if a < 3 {
-            (
-                Rotation3::from_scaled_axis(d) * xc,
-                Rotation3::from_scaled_axis(-d) * xc,
-            )
-        } else {
-            (xc + d, xc - d)
-        };
-        let diff = (k.project(&plus)? - k.project(&minus)?) / (2.0 * POSE_STEP);
-        j[(0, n + a)] = diff.x;
-        j[(1, n + a)] = diff.y;
+        d[a] = POSE_STEP;
+        *column = (k.project(&(xc + d))? - k.project(&(xc - d))?) / (2.0 * POSE_STEP);
+        rows[0][n + 3 + a] = column.x;
+        rows[1][n + 3 + a] = column.y;
     }
-    Some(j)
+    for a in 0..3 {
+        let w = Vector3::ith(a, 1.0).cross(xc);
+        let column = dx[0] * w.x + dx[1] * w.y + dx[2] * w.z;
+        rows[0][n + a] = column.x;
+        rows[1][n + a] = column.y;
+    }
+    Some(())
 }
 
 /// The expected mapping error (px) at noise σ̂ for information `info` (free × free).

@@ -62,7 +62,14 @@ pub fn of(c: &Calibration) -> Option<BoardJson> {
         })
         .collect();
     let noise = c.assessment.trust.map(|t| t.noise_px);
-    let correction_std = noise.and_then(|noise| {
+    // The calibration's own covariance says whether its normal matrix kept the
+    // corrections: when it eliminated them (fewer values in the images' blocks,
+    // as with 25 images), building that matrix again here gives nothing.
+    let eliminated = c
+        .covariance
+        .as_ref()
+        .is_ok_and(|cov| cov.first().is_some_and(|k| !k.corrections_kept));
+    let correction_std = noise.filter(|_| !eliminated).and_then(|noise| {
         let unit =
             crate::solver::covariance::unit_correction_std(&c.problem(), &c.state, &c.settings)
                 .ok()?;

@@ -6,6 +6,7 @@ use crate::model::camera::CameraSpec;
 use crate::model::dataset::{Dataset, HEADER};
 use crate::model::target::Target;
 use std::collections::{BTreeMap, HashMap, HashSet};
+use std::hash::{BuildHasher, Hasher};
 use std::path::Path;
 
 /// Reads an observations CSV; every problem is reported with its line.
@@ -41,10 +42,13 @@ fn open_reader<'a>(bytes: &'a [u8], path: &Path) -> Result<csv::Reader<&'a [u8]>
     }
     // Editors on Windows start UTF-8 files with a byte-order mark.
     let bytes = bytes.strip_prefix("\u{feff}".as_bytes()).unwrap_or(bytes);
+    // Fields are trimmed by `RowContext::parse_record` (`str::trim`, what
+    // `Trim::All` does to a string record after an ASCII trim, without its two
+    // new records per row).
     let mut reader = csv::ReaderBuilder::new()
         .has_headers(true)
         .flexible(true)
-        .trim(csv::Trim::All)
+        .trim(csv::Trim::Headers)
         .from_reader(bytes);
     let header = reader
         .headers()
@@ -76,18 +80,22 @@ struct RowContext<'a> {
 
 impl RowContext<'_> {
     /// Parses and checks one record (not yet for duplicates) at `line`.
-    fn parse_record(&self, record: &csv::StringRecord, line: u64) -> Result<Keyed> {
+    fn parse_record(&self, raw: &csv::StringRecord, line: u64) -> Result<Keyed> {
         let err = |message: String| data_err(self.path, line, message);
-        if record.len() != HEADER.len() {
+        if raw.len() != HEADER.len() {
             return Err(err(format!(
                 "expected 5 fields (camera,frame,corner,u,v), found {}",
-                record.len()
+                raw.len()
             )));
         }
-        let camera = *self.names.get(&record[0]).ok_or_else(|| {
+        let mut record = [""; 5];
+        for (f, field) in record.iter_mut().zip(raw) {
+            *f = field.trim();
+        }
+        let camera = *self.names.get(record[0]).ok_or_else(|| {
             err(format!(
                 "unknown camera `{}` (the config names: {})",
-                short(&record[0]),
+                short(record[0]),
                 self.cameras
                     .iter()
                     .map(|c| c.name.as_str())
@@ -97,11 +105,11 @@ impl RowContext<'_> {
         })?;
         let frame: i64 = record[1]
             .parse()
-            .map_err(|_| err(format!("frame `{}` is not an integer", short(&record[1]))))?;
+            .map_err(|_| err(format!("frame `{}` is not an integer", short(record[1]))))?;
         let corner: usize = record[2].parse().map_err(|_| {
             err(format!(
                 "corner `{}` is not a non-negative integer",
-                short(&record[2])
+                short(record[2])
             ))
         })?;
         let target = self.target;
@@ -117,7 +125,7 @@ impl RowContext<'_> {
         for (k, name) in [(3, "u"), (4, "v")] {
             let v: f64 = record[k]
                 .parse()
-                .map_err(|_| err(format!("{name} `{}` is not a number", short(&record[k]))))?;
+                .map_err(|_| err(format!("{name} `{}` is not a number", short(record[k]))))?;
             if !v.is_finite() {
                 return Err(err(format!("{name} is not finite ({v})")));
             }
@@ -145,7 +153,7 @@ pub fn parse(
             .map(|(i, c)| (c.name.as_str(), i))
             .collect(),
     };
-    let mut seen = HashSet::new();
+    let mut seen = HashSet::with_hasher(KeyHash);
     let mut rows = Vec::new();
     let mut record = csv::StringRecord::new();
     loop {
@@ -177,6 +185,39 @@ pub fn parse(
         ));
     }
     Ok(Dataset::from_keyed(target, cameras, rows))
+}
+
+/// A plain multiplicative hash for the (camera, frame, corner) keys of the
+/// duplicate check: the default SipHash cost as much as the parsing, and
+/// nothing here needs its resistance to chosen keys.
+#[derive(Clone, Copy, Default)]
+struct KeyHash;
+
+impl BuildHasher for KeyHash {
+    type Hasher = KeyHasher;
+    fn build_hasher(&self) -> KeyHasher {
+        KeyHasher(0)
+    }
+}
+
+struct KeyHasher(u64);
+
+impl Hasher for KeyHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        bytes.iter().for_each(|&b| self.write_u64(b.into()));
+    }
+    fn write_u64(&mut self, v: u64) {
+        self.0 = (self.0.rotate_left(5) ^ v).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+    fn write_usize(&mut self, v: usize) {
+        self.write_u64(v as u64);
+    }
+    fn write_i64(&mut self, v: i64) {
+        self.write_u64(v as u64);
+    }
 }
 
 /// Writes the observations CSV atomically, sorted by camera, frame and corner.
@@ -213,5 +254,48 @@ fn short(s: &str) -> String {
         format!("{}…", s.chars().take(40).collect::<String>())
     } else {
         s.to_string()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::lens::LensModel;
+
+    fn read(text: &str) -> Result<Dataset> {
+        let target = Target {
+            rows: 3,
+            cols: 3,
+            spacing: 0.02,
+        };
+        let cameras = vec![CameraSpec::new("cam 0", 640, 480, LensModel::Radial3)];
+        parse(text.as_bytes(), Path::new("o.csv"), target, cameras)
+    }
+
+    #[test]
+    fn fields_are_trimmed_of_any_whitespace() {
+        // ASCII and Unicode whitespace (a no-break space, an ideographic space)
+        // around fields, as `str::trim` takes them.
+        let clean =
+            read("camera,frame,corner,u,v\ncam 0,1,2,10.5,20.25\ncam 0,1,3,11,21\n").unwrap();
+        let padded = read(
+            " camera , frame,corner ,u,v\n\tcam 0 ,\u{a0}1, 2\u{3000},10.5 , 20.25\ncam 0,1,3,11,21\n",
+        )
+        .unwrap();
+        assert_eq!(padded.observations, clean.observations);
+        assert_eq!(padded.frame_ids, clean.frame_ids);
+        assert_eq!(clean.observations.len(), 2);
+        assert_eq!(clean.observations[0].uv, [10.5, 20.25]);
+    }
+
+    #[test]
+    fn a_duplicate_is_named_by_its_line() {
+        let text = "camera,frame,corner,u,v\ncam 0,1,2,1,1\ncam 0,2,2,1,1\ncam 0,1,2,3,3\n";
+        let e = read(text).unwrap_err().to_string();
+        assert!(e.contains("line 4") || e.contains(":4"), "{e}");
+        assert!(
+            e.contains("duplicate observation of camera cam 0, frame 1, corner 2"),
+            "{e}"
+        );
     }
 }

@@ -38,6 +38,10 @@ pub struct IntrinsicsCovariance {
     pub free: Vec<bool>,
     /// n × n over the lens parameters, in their units squared per px².
     pub unit: DMatrix<f64>,
+    /// Whether the board's static corrections stayed in the dense reduced
+    /// system this was computed with (then that system gives their σ too); false
+    /// when they were eliminated first or the problem has none free.
+    pub corrections_kept: bool,
 }
 
 /// A camera's uncertainty figures at a given noise (docs/conventions.md §3a, §5).
@@ -68,14 +72,33 @@ pub fn projection_jacobian(k: &Intrinsics, ray: &Vector3<f64>) -> Option<DMatrix
 
 /// [`projection_jacobian`]'s two rows on the stack (the first n entries hold it):
 /// the grids below take one per pixel, thousands per calibration.
-fn jacobian_rows(k: &Intrinsics, ray: &Vector3<f64>) -> Option<[[f64; MAX_PARAMS]; 2]> {
+pub fn jacobian_rows(k: &Intrinsics, ray: &Vector3<f64>) -> Option<[[f64; MAX_PARAMS]; 2]> {
     let mut j = [[0.0; MAX_PARAMS]; 2];
-    for (i, p) in k.params().iter().enumerate() {
+    // fx, fy, cx, cy only enter the last, affine step of the projection: the
+    // same arithmetic as `Intrinsics::project` on the one m (the same values to
+    // the bit), without projecting again per step.
+    let m = k.normalised(ray)?;
+    let p = k.params();
+    for i in 0..4 {
+        let h = PARAM_STEP * p[i].abs().max(1.0);
+        let pixel = |step: f64| {
+            let mut q = [p[0], p[1], p[2], p[3]];
+            q[i] += step;
+            Vector2::new(q[0] * m.x + q[2], q[1] * m.y + q[3])
+        };
+        let d = (pixel(h) - pixel(-h)) / (2.0 * h);
+        [j[0][i], j[1][i]] = [d.x, d.y];
+    }
+    // One copy, each parameter moved and put back in turn (no copy per step).
+    let mut q = *k;
+    for (i, &p) in k.params().iter().enumerate().skip(4) {
         let h = PARAM_STEP * p.abs().max(1.0);
-        let (mut plus, mut minus) = (*k, *k);
-        plus.params_mut()[i] += h;
-        minus.params_mut()[i] -= h;
-        let d = (plus.project(ray)? - minus.project(ray)?) / (2.0 * h);
+        q.params_mut()[i] = p + h;
+        let plus = q.project(ray);
+        q.params_mut()[i] = p - h;
+        let minus = q.project(ray);
+        q.params_mut()[i] = p;
+        let d = (plus? - minus?) / (2.0 * h);
         [j[0][i], j[1][i]] = [d.x, d.y];
     }
     Some(j)
@@ -365,6 +388,31 @@ mod tests {
         }
         assert_eq!(e.intrinsics_std[0].0, "fx");
         assert!((e.intrinsics_std[4].1 - sigma[(4, 4)].sqrt()).abs() < 1e-15);
+    }
+
+    #[test]
+    fn jacobian_rows_are_the_plain_central_differences() {
+        // The affine shortcut for fx, fy, cx, cy must give the central
+        // differences of whole projections to the bit, for every lens model.
+        for model in LensModel::ALL {
+            let k = Intrinsics::from_params(model, model.info().synthetic).unwrap();
+            for ray in [
+                Vector3::new(0.0, 0.0, 1.0),
+                Vector3::new(0.21, -0.13, 1.0),
+                Vector3::new(-0.33, 0.27, 0.9),
+            ] {
+                let got = jacobian_rows(&k, &ray).unwrap();
+                for (i, p) in k.params().iter().enumerate() {
+                    let h = PARAM_STEP * p.abs().max(1.0);
+                    let (mut plus, mut minus) = (k, k);
+                    plus.params_mut()[i] += h;
+                    minus.params_mut()[i] -= h;
+                    let d =
+                        (plus.project(&ray).unwrap() - minus.project(&ray).unwrap()) / (2.0 * h);
+                    assert_eq!([got[0][i], got[1][i]], [d.x, d.y], "{model:?} {i} {ray:?}");
+                }
+            }
+        }
     }
 
     #[test]

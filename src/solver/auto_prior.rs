@@ -14,8 +14,8 @@
 //! (`calibrate`) solves again with it, and drops it if it fits clearly worse.
 use crate::model::board::{bend_reach, BoardPriors, Method};
 use crate::model::state::{State, POSE_PARAMS};
-use crate::solver::covariance::unit_correction_information;
-use crate::solver::problem::{Problem, SolverSettings};
+use crate::solver::covariance::{jacobian, unit_correction_information_of};
+use crate::solver::problem::{Evaluation, Problem, SolverSettings};
 use nalgebra::{DMatrix, DVector};
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
@@ -86,9 +86,44 @@ impl AutoPrior {
         settings: &SolverSettings,
         noise_px: f64,
     ) -> Option<Estimate> {
+        let e = jacobian(problem, state, settings).ok()?;
+        self.estimate_of(&e, problem, state, settings, noise_px)
+    }
+
+    /// [`AutoPrior::estimate`] of each of `priors` from one Jacobian (each would
+    /// evaluate the same one), in their order.
+    pub fn estimate_all(
+        priors: &[AutoPrior],
+        problem: &Problem,
+        state: &State,
+        settings: &SolverSettings,
+        noise_px: f64,
+    ) -> Vec<Option<Estimate>> {
+        let e = if priors.is_empty() {
+            None
+        } else {
+            jacobian(problem, state, settings).ok()
+        };
+        priors
+            .iter()
+            .map(|p| p.estimate_of(e.as_ref()?, problem, state, settings, noise_px))
+            .collect()
+    }
+
+    fn estimate_of(
+        self,
+        e: &Evaluation,
+        problem: &Problem,
+        state: &State,
+        settings: &SolverSettings,
+        noise_px: f64,
+    ) -> Option<Estimate> {
         match self {
-            AutoPrior::Static => estimate_static_sigma(problem, state, settings, noise_px),
-            AutoPrior::Bend => estimate_bend_sigma(problem, state, settings, noise_px),
+            AutoPrior::Static => static_sigma_of(e, problem, state, settings, noise_px),
+            AutoPrior::Bend => {
+                let f = bends_with_variances_of(e, problem, state, noise_px)?;
+                bend_sigma_of(&f)
+            }
         }
     }
 }
@@ -124,8 +159,19 @@ pub fn estimate_static_sigma(
     settings: &SolverSettings,
     noise_px: f64,
 ) -> Option<Estimate> {
+    AutoPrior::Static.estimate(problem, state, settings, noise_px)
+}
+
+/// [`estimate_static_sigma`] from the Jacobian at `state`.
+fn static_sigma_of(
+    e: &Evaluation,
+    problem: &Problem,
+    state: &State,
+    settings: &SolverSettings,
+    noise_px: f64,
+) -> Option<Estimate> {
     let values = problem.layout().pack(state)?;
-    let (params, info) = unit_correction_information(problem, state, settings).ok()?;
+    let (params, info) = unit_correction_information_of(e, problem, settings).ok()?;
     let delta = DVector::from_iterator(params.len(), params.iter().map(|&p| values[p]));
     let n2 = noise_px * noise_px;
     let quadratic = delta.dot(&(&info * &delta)) / n2;
@@ -148,7 +194,11 @@ pub fn estimate_bend_sigma(
     settings: &SolverSettings,
     noise_px: f64,
 ) -> Option<Estimate> {
-    let f = bends_with_variances(problem, state, settings, noise_px)?;
+    AutoPrior::Bend.estimate(problem, state, settings, noise_px)
+}
+
+/// [`estimate_bend_sigma`] from the frames' bends and their variances.
+fn bend_sigma_of(f: &FrameBends) -> Option<Estimate> {
     let pairs =
         f.dz.iter()
             .zip(&f.variance)
@@ -166,10 +216,21 @@ fn bends_with_variances(
     settings: &SolverSettings,
     noise_px: f64,
 ) -> Option<FrameBends> {
+    let e = jacobian(problem, state, settings).ok()?;
+    bends_with_variances_of(&e, problem, state, noise_px)
+}
+
+/// [`bends_with_variances`] from the Jacobian at `state`.
+fn bends_with_variances_of(
+    e: &Evaluation,
+    problem: &Problem,
+    state: &State,
+    noise_px: f64,
+) -> Option<FrameBends> {
     let bends = frame_bends_at_reach(problem, state)?;
     let terms = bends.first().map_or(0, Vec::len);
     let reach = bend_reach(&problem.dataset.target, terms);
-    let variances = frame_information(problem, state, settings)?
+    let variances = frame_information(e, problem)?
         .into_iter()
         .map(|info| {
             let cov = info.try_inverse()?;
@@ -213,14 +274,9 @@ fn excess_sigma_of(pairs: impl Iterator<Item = (f64, f64)>, floor: f64) -> Optio
 
 /// Per frame, JᵀJ of its pose and bend values from its own observations' rows
 /// (weighted residuals, so in units of a weight-1 corner's noise).
-fn frame_information(
-    problem: &Problem,
-    state: &State,
-    settings: &SolverSettings,
-) -> Option<Vec<DMatrix<f64>>> {
+fn frame_information(e: &Evaluation, problem: &Problem) -> Option<Vec<DMatrix<f64>>> {
     let layout = problem.layout();
     let stride = layout.frame_stride;
-    let e = problem.jacobian(state, settings).ok()?;
     if e.jacobian_rows != 2 * problem.dataset.observations.len() {
         return None;
     }

@@ -458,9 +458,29 @@ fn weighted_normal(
     settings: &SolverSettings,
     eliminate: Eliminate,
 ) -> Result<(Evaluation, Vec<f64>, Normal), UncertaintyError> {
-    let e = problem
+    let e = jacobian(problem, state, settings)?;
+    let (weights, n) = weighted_normal_of(&e, problem, settings, eliminate)?;
+    Ok((e, weights, n))
+}
+
+/// The Jacobian of `problem` at `state`, as this module's error.
+pub fn jacobian(
+    problem: &Problem,
+    state: &State,
+    settings: &SolverSettings,
+) -> Result<Evaluation, UncertaintyError> {
+    problem
         .jacobian(state, settings)
-        .map_err(|e| UncertaintyError::Jacobian(e.to_string()))?;
+        .map_err(|e| UncertaintyError::Jacobian(e.to_string()))
+}
+
+/// [`weighted_normal`] from a Jacobian already evaluated.
+fn weighted_normal_of(
+    e: &Evaluation,
+    problem: &Problem,
+    settings: &SolverSettings,
+    eliminate: Eliminate,
+) -> Result<(Vec<f64>, Normal), UncertaintyError> {
     let rows = 2 * problem.dataset.observations.len();
     if e.jacobian_rows != rows
         || e.jacobian_row_ptr.len() != rows + 1
@@ -474,9 +494,9 @@ fn weighted_normal(
         )));
     }
     let weights = loss_weights(problem.dataset, settings, &e.residuals);
-    let mut n = normal_matrix(&e, &problem.layout(), &weights, eliminate)?;
+    let mut n = normal_matrix(e, &problem.layout(), &weights, eliminate)?;
     add_lens_prior(&mut n, &problem.lens_prior_weights(settings));
-    Ok((e, weights, n))
+    Ok((weights, n))
 }
 
 /// Σ_θ of every camera at unit noise, from the Jacobian of `problem` at `state`
@@ -496,7 +516,25 @@ pub fn unit_covariance(
         .collect();
     let x = solve_columns(&n, &scale, &targets);
     let sigma = sandwich(&e, &weights, &x, targets.len());
-    Ok(per_camera(&layout, &n.params, &targets, &sigma))
+    let mut out = per_camera(&layout, &n.params, &targets, &sigma);
+    let kept = corrections_kept(&n, &layout);
+    out.iter_mut().for_each(|c| c.corrections_kept = kept);
+    Ok(out)
+}
+
+/// Whether the normal matrix has free static corrections, all of them kept in
+/// its dense system (what [`unit_correction_std`] needs).
+fn corrections_kept(n: &Normal, layout: &Layout) -> bool {
+    let mut any = false;
+    for (&param, role) in n.params.iter().zip(&n.roles) {
+        if param >= layout.corrections {
+            if !matches!(role, Role::Kept(_)) {
+                return false;
+            }
+            any = true;
+        }
+    }
+    any
 }
 
 /// (WJX)ᵀ(WJX), t × t, with X given per Jacobian column (t values each).
@@ -538,6 +576,7 @@ fn per_camera(
             let mut cov = IntrinsicsCovariance {
                 free: vec![false; np],
                 unit: DMatrix::zeros(np, np),
+                corrections_kept: false,
             };
             let local = |u: usize| params[targets[u]].checked_sub(offset).filter(|&i| i < np);
             for a in 0..targets.len() {
@@ -570,11 +609,7 @@ pub fn unit_correction_std(
     let targets: Vec<usize> = (0..n.params.len())
         .filter(|&col| n.params[col] >= layout.corrections)
         .collect();
-    if targets.is_empty()
-        || targets
-            .iter()
-            .any(|&c| !matches!(n.roles[c], Role::Kept(_)))
-    {
+    if !corrections_kept(&n, &layout) {
         return Err(UncertaintyError::Jacobian(
             "the corrections are not determined well enough for a covariance".into(),
         ));
@@ -620,9 +655,18 @@ pub fn unit_correction_information(
     state: &State,
     settings: &SolverSettings,
 ) -> Result<(Vec<usize>, DMatrix<f64>), UncertaintyError> {
+    unit_correction_information_of(&jacobian(problem, state, settings)?, problem, settings)
+}
+
+/// [`unit_correction_information`] from the Jacobian [`jacobian`] gave.
+pub fn unit_correction_information_of(
+    e: &Evaluation,
+    problem: &Problem,
+    settings: &SolverSettings,
+) -> Result<(Vec<usize>, DMatrix<f64>), UncertaintyError> {
     let d = problem.dataset;
     let layout = problem.layout();
-    let (_, _, mut n) = weighted_normal(problem, state, settings, Eliminate::Frames)?;
+    let (_, mut n) = weighted_normal_of(e, problem, settings, Eliminate::Frames)?;
     let scale = jacobi_scale(d, &layout, &mut n)?;
     schur(d, &layout, &mut n)?;
     let (c, o): (Vec<usize>, Vec<usize>) =

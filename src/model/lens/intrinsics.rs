@@ -148,16 +148,24 @@ impl Intrinsics {
     /// image of it (behind a pinhole camera, outside a fisheye's valid domain).
     pub fn project(&self, xc: &Vector3<f64>) -> Option<Vector2<f64>> {
         let p = self.params();
-        let m = match self.model.info().projection {
+        let m = self.normalised(xc)?;
+        Some(Vector2::new(p[0] * m.x + p[2], p[1] * m.y + p[3]))
+    }
+
+    /// The normalised image coordinates m of a camera-frame point, whose pixel
+    /// is (fx mx + cx, fy my + cy): [`Intrinsics::project`] before its last step.
+    /// m does not depend on fx, fy, cx, cy (`Projection`'s contract).
+    pub fn normalised(&self, xc: &Vector3<f64>) -> Option<Vector2<f64>> {
+        let p = self.params();
+        match self.model.info().projection {
             Projection::PinholeLike(distort) => {
                 if xc.z <= 0.0 {
                     return None;
                 }
-                distort(p, xc.x / xc.z, xc.y / xc.z)
+                Some(distort(p, xc.x / xc.z, xc.y / xc.z))
             }
-            Projection::Central { project, .. } => project(p, xc)?,
-        };
-        Some(Vector2::new(p[0] * m.x + p[2], p[1] * m.y + p[3]))
+            Projection::Central { project, .. } => project(p, xc),
+        }
     }
 
     /// Unprojects a pixel to a unit ray in the camera frame; `None` where the
