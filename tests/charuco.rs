@@ -23,8 +23,10 @@ fn spec(rows: usize, cols: usize, dictionary: &str) -> CharucoSpec {
 }
 
 /// A scene of the board's inner corners in view `k` of a deterministic random
-/// sequence: tilts to ±0.5 rad, any in-plane rotation, 0.45 to 0.7 m, and
-/// every third view shifted so that the board leaves the image.
+/// sequence: tilts to ±0.5 rad, any in-plane rotation, 0.45 to 0.7 m, blur
+/// 0.5 to 1.2 px. Every third view is partial: the board's centre is put near
+/// one of the image's edges or corners (at most 0.1 of the image inside it, at
+/// most 0.05 beyond it), so that part of the board lies outside the picture.
 fn random_scene(s: &CharucoSpec, k: u64) -> Scene {
     let mut state = k.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0x5851_F42D;
     let mut uniform = |lo: f64, hi: f64| {
@@ -35,9 +37,24 @@ fn random_scene(s: &CharucoSpec, k: u64) -> Scene {
     };
     let rvec = [uniform(-0.5, 0.5), uniform(-0.5, 0.5), uniform(-3.1, 3.1)];
     let dist = uniform(0.45, 0.7);
-    let partial = k % 3 == 2;
-    let reach = if partial { 0.13 } else { 0.02 };
-    let shift = [uniform(-reach, reach), uniform(-reach, reach)];
+    // Where the board's centre lands, as a fraction of the image (0.5 = centre).
+    let mut at = [uniform(0.47, 0.53), uniform(0.47, 0.53)];
+    if k % 3 == 2 {
+        let near_edge = |x: f64| {
+            if x < 0.5 {
+                x * 0.3 - 0.05
+            } else {
+                1.05 - (x - 0.5) * 0.3
+            }
+        };
+        // Sides in turn: left/right, top/bottom, then a corner.
+        match (k / 3) % 3 {
+            0 => at = [near_edge(uniform(0.0, 1.0)), uniform(0.25, 0.75)],
+            1 => at = [uniform(0.25, 0.75), near_edge(uniform(0.0, 1.0))],
+            _ => at = [near_edge(uniform(0.0, 1.0)), near_edge(uniform(0.0, 1.0))],
+        }
+    }
+    let shift = shift_to(at, dist);
     let t = s.target();
     let mut sc = scene(t.rows, t.cols, rvec, dist, shift);
     sc.spacing = s.square;
@@ -77,22 +94,31 @@ fn opencv(s: &CharucoSpec, files: &[String]) -> serde_json::Value {
 /// Per board: our corners' squared errors against truth, our count and OpenCV's,
 /// OpenCV's squared errors. Panics on a wrong id (a corner over 1 px from the
 /// truth of its id) in either tool.
+#[derive(Default)]
 struct Tally {
     ours: Vec<f64>,
     theirs: Vec<f64>,
+    /// The same on the partial views only (every third view).
+    partial_ours: Vec<f64>,
+    partial_theirs: usize,
 }
 
 fn check_board(s: &CharucoSpec, views: u64, dir: &Path) -> Tally {
     let mut files = Vec::new();
     let mut truths = Vec::new();
-    let mut tally = Tally {
-        ours: Vec::new(),
-        theirs: Vec::new(),
-    };
+    let mut tally = Tally::default();
     for k in 0..views {
         let sc = random_scene(s, k);
         let (img, truth) = render(s, &sc);
-        let file = dir.join(format!("{}-{k:02}.png", s.dictionary));
+        let partial = k % 3 == 2;
+        let outside = truth.iter().filter(|t| t.is_none()).count();
+        assert!(
+            !partial || (outside > 0 && outside < truth.len()),
+            "{} view {k}: {outside} of {} corners out of view, a partial view wants some",
+            s.dictionary,
+            truth.len()
+        );
+        let file = dir.join(format!("{}-{}x{}-{k:02}.png", s.dictionary, s.rows, s.cols));
         img.save(&file).unwrap();
         if let Some(det) = detect(s, &img) {
             for c in &det.corners {
@@ -110,6 +136,9 @@ fn check_board(s: &CharucoSpec, views: u64, dir: &Path) -> Tally {
                     c.index
                 );
                 tally.ours.push(e * e);
+                if partial {
+                    tally.partial_ours.push(e * e);
+                }
             }
         }
         files.push(file.to_str().unwrap().to_string());
@@ -127,6 +156,7 @@ fn check_board(s: &CharucoSpec, views: u64, dir: &Path) -> Tally {
                 s.dictionary
             );
             tally.theirs.push(e * e);
+            tally.partial_theirs += usize::from(k % 3 == 2);
         }
     }
     // OpenCV's board places corner id at ((c+1)·square, (r+1)·square): ours at
@@ -148,7 +178,12 @@ fn rms(sq: &[f64]) -> f64 {
 
 /// Per board of four boards and three dictionaries (random poses, blur, noise,
 /// partial views): our tally and OpenCV's on the same images, every id right.
-fn tallies() -> Vec<(CharucoSpec, Tally)> {
+fn tallies() -> &'static [(CharucoSpec, Tally)] {
+    static TALLIES: std::sync::OnceLock<Vec<(CharucoSpec, Tally)>> = std::sync::OnceLock::new();
+    TALLIES.get_or_init(measure_tallies)
+}
+
+fn measure_tallies() -> Vec<(CharucoSpec, Tally)> {
     let dir = tempfile::tempdir().unwrap();
     let boards = [
         spec(5, 7, "DICT_4X4_50"),
@@ -161,14 +196,18 @@ fn tallies() -> Vec<(CharucoSpec, Tally)> {
         .map(|s| {
             let tally = check_board(&s, 12, dir.path());
             eprintln!(
-                "{} {}x{}: ours {} corners, RMS {:.4} px; OpenCV {} corners, RMS {:.4} px",
+                "{} {}x{}: ours {} corners, RMS {:.4} px; OpenCV {} corners, RMS {:.4} px; \
+                 partial views: ours {} (RMS {:.4} px), OpenCV {}",
                 s.dictionary,
                 s.rows,
                 s.cols,
                 tally.ours.len(),
                 rms(&tally.ours),
                 tally.theirs.len(),
-                rms(&tally.theirs)
+                rms(&tally.theirs),
+                tally.partial_ours.len(),
+                rms(&tally.partial_ours),
+                tally.partial_theirs,
             );
             (s, tally)
         })
@@ -181,26 +220,35 @@ fn rendered_charuco_corners_match_truth() {
     if !common::python_has(&["cv2"]) {
         return;
     }
-    let all: Vec<f64> = tallies().into_iter().flat_map(|(_, t)| t.ours).collect();
+    let all: Vec<f64> = tallies()
+        .iter()
+        .flat_map(|(_, t)| t.ours.iter().copied())
+        .collect();
     let ours = rms(&all);
     eprintln!("all boards: ours RMS {ours:.4} px over {}", all.len());
     assert!(ours <= 0.06, "RMS {ours} px");
 }
 
-/// At least as many corners as OpenCV finds on the same images.
+/// At least as many corners as OpenCV finds on the same images, on every board
+/// and on its partial views alone.
 #[test]
-#[ignore = "fails its target on DICT_6X6_250 6x8 (measured: 294 corners against OpenCV's 380; calib-targets finds no board in 2 of its 12 views); 1569 vs 1577 over all 48 views; run with --ignored"]
 fn rendered_charuco_boards_find_as_many_corners_as_opencv() {
     if !common::python_has(&["cv2"]) {
         return;
     }
     for (s, tally) in tallies() {
+        let board = format!("{} {}x{}", s.dictionary, s.rows, s.cols);
         assert!(
             tally.ours.len() >= tally.theirs.len(),
-            "{}: {} corners, OpenCV {}",
-            s.dictionary,
+            "{board}: {} corners, OpenCV {}",
             tally.ours.len(),
             tally.theirs.len()
+        );
+        assert!(
+            tally.partial_ours.len() >= tally.partial_theirs,
+            "{board}, partial views: {} corners, OpenCV {}",
+            tally.partial_ours.len(),
+            tally.partial_theirs
         );
     }
 }
@@ -212,8 +260,21 @@ fn deformcal(args: &[&str]) -> std::process::Output {
         .expect("run deformcal")
 }
 
-/// Well-tilted views, several cut by the image edge (where a chessboard's place
-/// could be ambiguous and a ChArUco board's is not); (rotation, distance, shift).
+/// The shift (metres) that puts a board's centre `dist` m away at `at`, a
+/// fraction of the image (0.5 = centre; 0 or 1 = on its edge), lens distortion
+/// aside.
+fn shift_to(at: [f64; 2], dist: f64) -> [f64; 2] {
+    let cam = camera();
+    [
+        (at[0] * W as f64 - cam.cx) / cam.fx * dist,
+        (at[1] * H as f64 - cam.cy) / cam.fy * dist,
+    ]
+}
+
+/// Well-tilted views, half of them with the board's centre on the image's
+/// edge or corner, so that part of the board is outside the picture (where a
+/// chessboard's place could be ambiguous and a ChArUco board's is not);
+/// (rotation, distance, shift).
 fn calibration_views() -> Vec<([f64; 3], f64, [f64; 2])> {
     vec![
         ([0.45, -0.1, 0.05], 0.6, [0.0, 0.0]),
@@ -221,11 +282,11 @@ fn calibration_views() -> Vec<([f64; 3], f64, [f64; 2])> {
         ([0.1, 0.5, -0.1], 0.65, [-0.03, 0.0]),
         ([0.2, -0.45, 0.2], 0.55, [0.03, -0.02]),
         ([-0.3, -0.35, 1.6], 0.65, [0.0, 0.03]),
-        ([0.35, 0.35, -0.2], 0.5, [-0.12, -0.08]),
-        ([-0.5, 0.0, 0.0], 0.6, [0.12, 0.09]),
-        ([0.0, 0.45, 3.0], 0.55, [0.13, -0.08]),
-        ([0.25, 0.25, 0.3], 0.45, [-0.17, 0.05]),
-        ([0.3, -0.3, -0.1], 0.5, [-0.12, 0.1]),
+        ([0.35, 0.35, -0.2], 0.5, shift_to([0.02, 0.15], 0.5)),
+        ([-0.5, 0.0, 0.0], 0.6, shift_to([0.98, 0.85], 0.6)),
+        ([0.0, 0.45, 3.0], 0.55, shift_to([0.9, 0.02], 0.55)),
+        ([0.25, 0.25, 0.3], 0.45, shift_to([0.1, 0.95], 0.45)),
+        ([0.3, -0.3, -0.1], 0.5, shift_to([0.5, 1.0], 0.5)),
     ]
 }
 
@@ -258,6 +319,11 @@ fn calibration_from_charuco_photos_matches_truth() {
             .unwrap();
         truths.push(truth);
     }
+    let cut = truths
+        .iter()
+        .filter(|t| t.iter().any(|c| c.is_none()))
+        .count();
+    assert!(cut >= 5, "only {cut} views leave the image");
     let board = "[target]\ntype = \"charuco\"\nrows = 7\ncols = 10\nsquare = 0.03\nmarker = 0.022\ndictionary = \"DICT_5X5_100\"\n";
     let camera_toml =
         format!("[[cameras]]\nname = \"cam0\"\nwidth = {W}\nheight = {H}\nmodel = \"radial3\"\n");
@@ -274,6 +340,7 @@ fn calibration_from_charuco_photos_matches_truth() {
         String::from_utf8_lossy(&out.stderr)
     );
     let csv = std::fs::read_to_string(dir.path().join("out/detections.csv")).unwrap();
+    eprintln!("{cut} of the views leave the image; detections:\n{csv}");
     assert!(
         csv.lines().filter(|l| l.contains(",partial,")).count() >= 3,
         "partial views keep their ids: {csv}"
