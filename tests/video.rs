@@ -6,7 +6,7 @@
 //! rerun, and the intrinsics at least as close to the truth (mapping error) as a
 //! calibration from every 10th frame of the same mp4. Also: no ffmpeg, and a file
 //! that is not a video, each one message and a non-zero exit.
-use deformcal::app::detect::render::{render_board, rodrigues, Camera, Pose, Scene};
+use deformcal::app::detect::render::{render_board, Camera, Scene};
 use deformcal::model::lens::Intrinsics;
 use deformcal::model::metrics::mapping_error;
 use image::GrayImage;
@@ -79,30 +79,16 @@ fn scene_at(i: f64) -> Scene {
         mix(a.1[2], b.1[2]),
     ];
     let (dist, shift) = (mix(a.2, b.2), [mix(a.3[0], b.3[0]), mix(a.3[1], b.3[1])]);
-    let (rows, cols, spacing) = (6, 9, 0.03);
-    let (w, h) = ((cols - 1) as f64 * spacing, (rows - 1) as f64 * spacing);
-    let r = rodrigues(rvec);
-    let c: Vec<f64> = (0..3)
-        .map(|j| r[j][0] * w / 2.0 + r[j][1] * h / 2.0)
-        .collect();
     Scene {
         camera: camera().into(),
-        image_circle_deg: 0.0,
-        vignetting: 0.0,
-        pose: Pose {
-            rvec,
-            t: [shift[0] - c[0], shift[1] - c[1], dist - c[2]],
-        },
         bend: 0.002 * (2.0 * std::f64::consts::PI * i / FRAMES as f64).sin(),
-        rows,
-        cols,
-        spacing,
         width: W,
         height: H,
         blur: 0.7,
         noise: 1.5,
         seed: i as u64,
         supersample: 2,
+        ..crate::detect_common::scene(6, 9, rvec, dist, shift)
     }
 }
 
