@@ -3,7 +3,10 @@
 //! (one thread) on the same images. Images: rendered 9×6 boards at 1280×960, and
 //! OpenCV's sample photos (640×480) when tests/opencv_photos.rs has cached them.
 //! Run with `cargo bench --bench detect`.
-use deformcal::app::detect::render::{render_board, rodrigues, Camera, Pose, Scene};
+#[path = "../tests/detect_common/mod.rs"]
+mod detect_common;
+
+use deformcal::app::detect::render::{render_board, Camera, Scene};
 use deformcal::app::detect::Detector;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
@@ -19,11 +22,6 @@ fn scene(k: usize) -> Scene {
         0.2 * (k % 3) as f64 - 0.2,
         0.4 * k as f64,
     ];
-    let (w, h, s) = (8.0 * 0.03, 5.0 * 0.03, 0.03);
-    let r = rodrigues(rvec);
-    let c: Vec<f64> = (0..3)
-        .map(|i| r[i][0] * w / 2.0 + r[i][1] * h / 2.0)
-        .collect();
     Scene {
         camera: Camera {
             fx: 1100.0,
@@ -34,22 +32,11 @@ fn scene(k: usize) -> Scene {
             k2: 0.02,
         }
         .into(),
-        image_circle_deg: 0.0,
-        vignetting: 0.0,
-        pose: Pose {
-            rvec,
-            t: [-c[0], -c[1], 0.6 - c[2]],
-        },
-        bend: 0.0,
-        rows: 6,
-        cols: 9,
-        spacing: s,
         width: 1280,
         height: 960,
-        blur: 0.9,
-        noise: 2.0,
         seed: k as u64,
         supersample: 4,
+        ..detect_common::scene(6, 9, rvec, 0.6, [0.0, 0.0])
     }
 }
 

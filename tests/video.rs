@@ -6,7 +6,7 @@
 //! rerun, and the intrinsics at least as close to the truth (mapping error) as a
 //! calibration from every 10th frame of the same mp4. Also: no ffmpeg, and a file
 //! that is not a video, each one message and a non-zero exit.
-use deformcal::app::detect::render::{render_board, rodrigues, Camera, Pose, Scene};
+use deformcal::app::detect::render::{render_board, Camera, Scene};
 use deformcal::model::lens::Intrinsics;
 use deformcal::model::metrics::mapping_error;
 use image::GrayImage;
@@ -79,30 +79,16 @@ fn scene_at(i: f64) -> Scene {
         mix(a.1[2], b.1[2]),
     ];
     let (dist, shift) = (mix(a.2, b.2), [mix(a.3[0], b.3[0]), mix(a.3[1], b.3[1])]);
-    let (rows, cols, spacing) = (6, 9, 0.03);
-    let (w, h) = ((cols - 1) as f64 * spacing, (rows - 1) as f64 * spacing);
-    let r = rodrigues(rvec);
-    let c: Vec<f64> = (0..3)
-        .map(|j| r[j][0] * w / 2.0 + r[j][1] * h / 2.0)
-        .collect();
     Scene {
         camera: camera().into(),
-        image_circle_deg: 0.0,
-        vignetting: 0.0,
-        pose: Pose {
-            rvec,
-            t: [shift[0] - c[0], shift[1] - c[1], dist - c[2]],
-        },
         bend: 0.002 * (2.0 * std::f64::consts::PI * i / FRAMES as f64).sin(),
-        rows,
-        cols,
-        spacing,
         width: W,
         height: H,
         blur: 0.7,
         noise: 1.5,
         seed: i as u64,
         supersample: 2,
+        ..crate::detect_common::scene(6, 9, rvec, dist, shift)
     }
 }
 
@@ -364,4 +350,114 @@ fn no_ffmpeg_or_no_video_is_one_message() {
     let stderr = String::from_utf8_lossy(&gone.stderr);
     assert_ne!(gone.status.code(), Some(0), "{stderr}");
     assert!(stderr.contains("gone.mp4"), "{stderr}");
+}
+
+/// `(u, v)` of a `w` × `h` picture turned counter-clockwise by `ccw` degrees
+/// (a quarter-turn multiple), in the turned picture.
+fn turn_point(p: [f64; 2], w: u32, h: u32, ccw: i32) -> [f64; 2] {
+    let (w, h) = (w as f64 - 1.0, h as f64 - 1.0);
+    match ccw.rem_euclid(360) {
+        90 => [p[1], w - p[0]],
+        180 => [w - p[0], h - p[1]],
+        270 => [h - p[1], p[0]],
+        _ => p,
+    }
+}
+
+/// A phone records a portrait video as landscape frames plus a display matrix;
+/// players (and ffmpeg) turn the frames for display. Our frames must be the
+/// upright ones, of the displayed size, with the board's corners where they
+/// are in the upright picture (within 1 px: H.264 moves some by 0.4 px; a
+/// wrong turn or a mirror moves them by hundreds). The expected turn is read from ffprobe's
+/// `rotation` (libavutil's display matrix angle, counter-clockwise).
+#[test]
+fn rotated_videos_come_out_upright() {
+    use deformcal::app::video::ffmpeg::{probe, Frames};
+    if !have_ffmpeg() {
+        eprintln!("skipped: no `ffmpeg` on PATH (Debian: apt-get install ffmpeg; CI installs it)");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let keys = [0.0, 55.0, 125.0, 195.0];
+    let shots: Vec<_> = keys
+        .par_iter()
+        .map(|&i| render_board(&scene_at(i)))
+        .collect();
+    let plain = dir.path().join("plain.mp4");
+    let mut ff = Command::new("ffmpeg")
+        .args(["-v", "error", "-y", "-f", "rawvideo", "-pix_fmt", "gray"])
+        .args(["-s", &format!("{W}x{H}"), "-r", "30", "-i", "-"])
+        .args(["-c:v", "libx264", "-crf", "10", "-pix_fmt", "yuv420p"])
+        .arg(&plain)
+        .stdin(Stdio::piped())
+        .spawn()
+        .expect("start ffmpeg");
+    let mut stdin = ff.stdin.take().unwrap();
+    for (img, _) in &shots {
+        stdin.write_all(img.as_raw()).unwrap();
+    }
+    drop(stdin);
+    assert!(ff.wait().unwrap().success());
+    for tag in [0, 90, 180, 270] {
+        let video = dir.path().join(format!("rotate{tag}.mp4"));
+        let st = Command::new("ffmpeg")
+            .args(["-v", "error", "-y", "-i"])
+            .arg(&plain)
+            .args(["-c", "copy", "-metadata:s:v:0", &format!("rotate={tag}")])
+            .arg(&video)
+            .status()
+            .unwrap();
+        assert!(st.success());
+        let side = Command::new("ffprobe")
+            .args(["-v", "error", "-select_streams", "v:0"])
+            .args([
+                "-show_entries",
+                "stream_side_data=rotation",
+                "-of",
+                "csv=p=0",
+            ])
+            .arg(&video)
+            .output()
+            .unwrap();
+        let text = String::from_utf8_lossy(&side.stdout);
+        let ccw = text
+            .trim()
+            .trim_matches(',')
+            .parse::<f64>()
+            .unwrap_or(0.0)
+            .round() as i32;
+        assert_eq!(ccw.rem_euclid(90), 0, "rotate={tag}: rotation {text}");
+        let quarter = ccw.rem_euclid(180) == 90;
+        let p = probe(&video).unwrap();
+        let size = if quarter { (H, W) } else { (W, H) };
+        assert_eq!((p.width, p.height), size, "rotate={tag} (rotation {ccw}°)");
+        let mut frames = Frames::start(&video, &p, 1).unwrap();
+        let mut k = 0;
+        while let Some(f) = frames.next_frame().unwrap() {
+            assert_eq!(f.image.dimensions(), size);
+            let det = deformcal::app::detect::detect_image(
+                &image::DynamicImage::ImageLuma8(f.image),
+                6,
+                9,
+            )
+            .unwrap_or_else(|e| panic!("rotate={tag} frame {k}: {e}"));
+            let truth = &shots[k].1;
+            let worst = det
+                .corners
+                .iter()
+                .map(|c| {
+                    let t = turn_point(truth[c.index].unwrap(), W, H, ccw);
+                    (t[0] - c.uv[0]).hypot(t[1] - c.uv[1])
+                })
+                .fold(0.0, f64::max);
+            assert!(
+                det.corners.len() >= 20 && worst < 1.0,
+                "rotate={tag} (rotation {ccw}°) frame {k}: {} corners, worst {worst:.3} px from the upright truth",
+                det.corners.len()
+            );
+            k += 1;
+        }
+        frames.finish().unwrap();
+        assert_eq!(k, keys.len());
+    }
 }

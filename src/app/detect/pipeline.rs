@@ -31,8 +31,7 @@ pub(crate) fn detect(
     if width < 8 || height < 8 {
         return Err(Rejection::NoBoard);
     }
-    let fimg = load::to_float(img);
-    let gray = load::to_gray8(&fimg);
+    let (fimg, gray) = load::grey_images(img);
     // Coarse to fine first: ChESS finds seeds on a downscaled pyramid level and
     // computes its response at full resolution only around them, several times
     // less work than the full-image response. It misses corners now and then

@@ -39,6 +39,43 @@ impl FloatImage {
         top * (1.0 - fy) + bot * fy
     }
 
+    /// The (2·reach+1)² samples at p + (dx, dy) for integer offsets up to
+    /// `reach`, row by row, as [`FloatImage::sample`] gives them. Every sample
+    /// shares p's fractional part, so inside the image the bilinear weights are
+    /// computed once and the pixels read by index; a window over the border
+    /// samples one by one (clamped to the edge).
+    pub fn window(&self, p: [f64; 2], reach: isize) -> Vec<f64> {
+        let side = (2 * reach + 1) as usize;
+        let (x0, y0) = (p[0].floor(), p[1].floor());
+        let (left, top) = (x0 as isize - reach, y0 as isize - reach);
+        let inside = left >= 0
+            && top >= 0
+            && left + (side as isize) < self.width as isize
+            && top + (side as isize) < self.height as isize;
+        if !(inside && p[0].is_finite() && p[1].is_finite()) {
+            let mut out = Vec::with_capacity(side * side);
+            for dy in -reach..=reach {
+                for dx in -reach..=reach {
+                    out.push(self.sample(p[0] + dx as f64, p[1] + dy as f64));
+                }
+            }
+            return out;
+        }
+        let (fx, fy) = (p[0] - x0, p[1] - y0);
+        let (left, top) = (left as usize, top as usize);
+        let mut out = Vec::with_capacity(side * side);
+        for j in 0..side {
+            let row = &self.data[(top + j) * self.width + left..];
+            let next = &self.data[(top + j + 1) * self.width + left..];
+            for i in 0..side {
+                let t = row[i] as f64 * (1.0 - fx) + row[i + 1] as f64 * fx;
+                let b = next[i] as f64 * (1.0 - fx) + next[i + 1] as f64 * fx;
+                out.push(t * (1.0 - fy) + b * fy);
+            }
+        }
+        out
+    }
+
     /// Mean of a few bilinear samples in a disc of radius `r` around (x, y);
     /// used to read a square's brightness robustly against noise.
     pub fn patch_mean(&self, x: f64, y: f64, r: f64) -> f64 {
@@ -78,10 +115,11 @@ const EPS: f64 = 1e-3;
 pub fn refine_corner(img: &FloatImage, start: [f64; 2], half: usize) -> Option<Refined> {
     let mut p = start;
     let mut last = None;
+    let weights = square_weights(half);
     for _ in 0..MAX_ITERS {
         // The system is in coordinates relative to p (large absolute pixel
         // coordinates would cancel catastrophically in the residual).
-        let sys = normal_system(img, p, half)?;
+        let sys = normal_system(img, p, half, &weights)?;
         let d = sys.solve()?;
         p = [p[0] + d[0], p[1] + d[1]];
         let step = (d[0] * d[0] + d[1] * d[1]).sqrt();
@@ -105,15 +143,16 @@ pub fn refine_corner(img: &FloatImage, start: [f64; 2], half: usize) -> Option<R
 
 fn asymmetry(img: &FloatImage, p: [f64; 2], half: usize) -> f64 {
     let h = half as isize;
+    let side = 2 * h + 1;
+    let win = img.window(p, h);
+    let at = |dx: isize, dy: isize| win[((h + dy) * side + h + dx) as usize];
     let mut vals = Vec::with_capacity(((2 * h + 1) * (h + 1)) as usize);
     for dy in 0..=h {
         for dx in -h..=h {
             if dy == 0 && dx <= 0 {
                 continue;
             }
-            let a = img.sample(p[0] + dx as f64, p[1] + dy as f64);
-            let b = img.sample(p[0] - dx as f64, p[1] - dy as f64);
-            vals.push((a, b));
+            vals.push((at(dx, dy), at(-dx, -dy)));
         }
     }
     symmetry_misfit(&vals)
@@ -144,6 +183,33 @@ struct NormalSystem {
 }
 
 impl NormalSystem {
+    fn new() -> NormalSystem {
+        NormalSystem {
+            a: [0.0; 3],
+            b: [0.0; 2],
+            c: 0.0,
+            count: 0.0,
+        }
+    }
+
+    /// One sample: gradient `g` at offset `q` from the window centre, weight
+    /// `w`, standing for `count` pixels.
+    fn add(&mut self, g: [f64; 2], q: [f64; 2], w: f64, count: f64) {
+        let gq = g[0] * q[0] + g[1] * q[1];
+        self.a[0] += w * g[0] * g[0];
+        self.a[1] += w * g[0] * g[1];
+        self.a[2] += w * g[1] * g[1];
+        self.b[0] += w * g[0] * gq;
+        self.b[1] += w * g[1] * gq;
+        self.c += w * gq * gq;
+        self.count += count;
+    }
+
+    /// The system when it has any gradient at all.
+    fn usable(self) -> Option<NormalSystem> {
+        (self.a[0] + self.a[2] > 0.0).then_some(self)
+    }
+
     fn solve(&self) -> Option<[f64; 2]> {
         let [a11, a12, a22] = self.a;
         let det = a11 * a22 - a12 * a12;
@@ -180,43 +246,41 @@ impl NormalSystem {
     }
 }
 
-fn normal_system(img: &FloatImage, p: [f64; 2], half: usize) -> Option<NormalSystem> {
+/// The Gaussian weights of a (2·half+1)² window, row by row: the same at every
+/// iteration and corner of one window size, so computed once per corner.
+fn square_weights(half: usize) -> Vec<f64> {
+    let h = half as isize;
+    let sigma2 = 2.0 * (half as f64 * 0.5).powi(2).max(1.0);
+    (-h..=h)
+        .flat_map(|dy| (-h..=h).map(move |dx| (dy, dx)))
+        .map(|(dy, dx)| (-((dx * dx + dy * dy) as f64) / sigma2).exp())
+        .collect()
+}
+
+fn normal_system(
+    img: &FloatImage,
+    p: [f64; 2],
+    half: usize,
+    weights: &[f64],
+) -> Option<NormalSystem> {
     let h = half as isize;
     let side = (2 * h + 3) as usize;
     // Resample a window one pixel wider than needed, centred on p, so central
     // differences are available for every window pixel.
-    let mut win = vec![0.0; side * side];
-    for (k, v) in win.iter_mut().enumerate() {
-        let dx = (k % side) as f64 - (h + 1) as f64;
-        let dy = (k / side) as f64 - (h + 1) as f64;
-        *v = img.sample(p[0] + dx, p[1] + dy);
-    }
-    let sigma2 = 2.0 * (half as f64 * 0.5).powi(2).max(1.0);
-    let mut sys = NormalSystem {
-        a: [0.0; 3],
-        b: [0.0; 2],
-        c: 0.0,
-        count: 0.0,
-    };
+    let win = img.window(p, h + 1);
+    let mut sys = NormalSystem::new();
+    let inner = side - 2;
     for j in 1..side - 1 {
         for i in 1..side - 1 {
-            let gx = 0.5 * (win[j * side + i + 1] - win[j * side + i - 1]);
-            let gy = 0.5 * (win[(j + 1) * side + i] - win[(j - 1) * side + i]);
-            let dx = i as f64 - (h + 1) as f64;
-            let dy = j as f64 - (h + 1) as f64;
-            let w = (-(dx * dx + dy * dy) / sigma2).exp();
-            let q = [dx, dy];
-            let gq = gx * q[0] + gy * q[1];
-            sys.a[0] += w * gx * gx;
-            sys.a[1] += w * gx * gy;
-            sys.a[2] += w * gy * gy;
-            sys.b[0] += w * gx * gq;
-            sys.b[1] += w * gy * gq;
-            sys.c += w * gq * gq;
-            sys.count += 1.0;
+            let g = [
+                0.5 * (win[j * side + i + 1] - win[j * side + i - 1]),
+                0.5 * (win[(j + 1) * side + i] - win[(j - 1) * side + i]),
+            ];
+            let q = [i as f64 - (h + 1) as f64, j as f64 - (h + 1) as f64];
+            sys.add(g, q, weights[(j - 1) * inner + i - 1], 1.0);
         }
     }
-    (sys.a[0] + sys.a[2] > 0.0).then_some(sys)
+    sys.usable()
 }
 
 /// The local grid frame of a corner: the image vectors from it to its next
@@ -328,27 +392,16 @@ impl AffineWindow {
     }
 
     fn normal_system(&self, img: &FloatImage, p: [f64; 2]) -> Option<NormalSystem> {
-        let mut sys = NormalSystem {
-            a: [0.0; 3],
-            b: [0.0; 2],
-            c: 0.0,
-            count: 0.0,
-        };
+        let mut sys = NormalSystem::new();
         for &(q, w) in &self.samples {
             let (x, y) = (p[0] + q[0], p[1] + q[1]);
-            let gx = 0.5 * (img.sample(x + 1.0, y) - img.sample(x - 1.0, y));
-            let gy = 0.5 * (img.sample(x, y + 1.0) - img.sample(x, y - 1.0));
-            let w = w * self.area;
-            let gq = gx * q[0] + gy * q[1];
-            sys.a[0] += w * gx * gx;
-            sys.a[1] += w * gx * gy;
-            sys.a[2] += w * gy * gy;
-            sys.b[0] += w * gx * gq;
-            sys.b[1] += w * gy * gq;
-            sys.c += w * gq * gq;
-            sys.count += self.area;
+            let g = [
+                0.5 * (img.sample(x + 1.0, y) - img.sample(x - 1.0, y)),
+                0.5 * (img.sample(x, y + 1.0) - img.sample(x, y - 1.0)),
+            ];
+            sys.add(g, q, w * self.area, self.area);
         }
-        (sys.a[0] + sys.a[2] > 0.0).then_some(sys)
+        sys.usable()
     }
 
     /// [`asymmetry`] over this window: pairs of samples mirrored through `p`.
@@ -364,5 +417,42 @@ impl AffineWindow {
             })
             .collect();
         symmetry_misfit(&vals)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_window_is_its_samples_inside_and_across_the_border() {
+        let img = FloatImage {
+            width: 23,
+            height: 17,
+            data: (0..23 * 17)
+                .map(|k| ((k * 37) % 101) as f32 * 1.7)
+                .collect(),
+        };
+        for p in [
+            [11.3, 8.6],
+            [2.2, 2.9],
+            [0.4, 15.7],
+            [21.9, 1.1],
+            [-3.0, 30.5],
+        ] {
+            let win = img.window(p, 2);
+            let mut k = 0;
+            for dy in -2..=2 {
+                for dx in -2..=2 {
+                    let s = img.sample(p[0] + dx as f64, p[1] + dy as f64);
+                    assert!(
+                        (win[k] - s).abs() < 1e-9,
+                        "{p:?} ({dx}, {dy}): {} vs {s}",
+                        win[k]
+                    );
+                    k += 1;
+                }
+            }
+        }
     }
 }

@@ -2,7 +2,9 @@
 //! says why the binaries rather than a binding): `ffprobe` gives the size and every
 //! frame's presentation time from the packets (no decoding), and `ffmpeg` decodes
 //! every `stride`-th frame to 8-bit grey on a pipe, read one frame at a time so a
-//! long video never sits in memory. Nothing here knows of boards.
+//! long video never sits in memory. Frames come out upright: ffmpeg turns them by
+//! the rotation metadata as players do, and the size given is the turned one.
+//! Nothing here knows of boards.
 use crate::error::{Error, Result};
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -19,10 +21,14 @@ pub const MAX_FRAMES: usize = 1_000_000;
 /// What `ffprobe` says of the first video stream.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Probe {
-    /// Frame width in pixels (before any rotation metadata, which is not applied).
+    /// Frame width in pixels as displayed: rotation metadata applied, as
+    /// ffmpeg applies it when decoding.
     pub width: u32,
-    /// Frame height in pixels.
+    /// Frame height in pixels as displayed.
     pub height: u32,
+    /// The clockwise quarter turn (0, 90, 180 or 270°) from the stored frames to
+    /// the displayed ones.
+    pub turned: u32,
     /// Presentation time (s) of every frame, in display order.
     pub times: Vec<f64>,
 }
@@ -74,64 +80,25 @@ pub fn probe(path: &Path) -> Result<Probe> {
     if let Err(e) = std::fs::metadata(path) {
         return Err(Error::io(path, e));
     }
-    let os = |s: &'static str| std::ffi::OsStr::new(s);
-    let size = run(
-        FFPROBE,
-        &[
-            os("-v"),
-            os("error"),
-            os("-select_streams"),
-            os("v:0"),
-            os("-show_entries"),
-            os("stream=width,height"),
-            os("-of"),
-            os("csv=p=0"),
-            path.as_os_str(),
-        ],
+    let stream = ffprobe(
         path,
+        "stream=width,height:stream_side_data=rotation:stream_tags=rotate",
+        "default=nw=1",
     )?;
-    if !size.status.success() {
-        return Err(video_err(
-            path,
-            format!("not a readable video: {}", first_line(&size.stderr)),
-        ));
-    }
-    let text = String::from_utf8_lossy(&size.stdout);
-    let mut dims = text.trim().split(',').map(|s| s.trim().parse::<u32>());
-    let (Some(Ok(width)), Some(Ok(height))) = (dims.next(), dims.next()) else {
-        return Err(video_err(path, "has no video stream"));
+    let (width, height, turn) =
+        parse_stream(&stream).ok_or_else(|| video_err(path, "has no video stream"))?;
+    let (width, height) = if turn % 180 == 90 {
+        (height, width)
+    } else {
+        (width, height)
     };
-    if width == 0 || height == 0 {
-        return Err(video_err(path, "has no video stream"));
-    }
     crate::app::detect::load::check_size(
         width,
         height,
         crate::app::detect::Detector::default().max_pixels,
     )
     .map_err(|r| video_err(path, r.to_string()))?;
-    let packets = run(
-        FFPROBE,
-        &[
-            os("-v"),
-            os("error"),
-            os("-select_streams"),
-            os("v:0"),
-            os("-show_entries"),
-            os("packet=pts_time"),
-            os("-of"),
-            os("csv=p=0"),
-            path.as_os_str(),
-        ],
-        path,
-    )?;
-    if !packets.status.success() {
-        return Err(video_err(
-            path,
-            format!("not a readable video: {}", first_line(&packets.stderr)),
-        ));
-    }
-    let times = frame_times(&String::from_utf8_lossy(&packets.stdout));
+    let times = frame_times(&ffprobe(path, "packet=pts_time", "csv=p=0")?);
     if times.is_empty() {
         return Err(video_err(path, "has no frames"));
     }
@@ -144,8 +111,68 @@ pub fn probe(path: &Path) -> Result<Probe> {
     Ok(Probe {
         width,
         height,
+        turned: turn,
         times,
     })
+}
+
+/// What `ffprobe` prints of `entries` of the first video stream in `format`; an
+/// error with its first message when it fails.
+fn ffprobe(path: &Path, entries: &str, format: &str) -> Result<String> {
+    let os = std::ffi::OsStr::new;
+    let out = run(
+        FFPROBE,
+        &[
+            os("-v"),
+            os("error"),
+            os("-select_streams"),
+            os("v:0"),
+            os("-show_entries"),
+            os(entries),
+            os("-of"),
+            os(format),
+            path.as_os_str(),
+        ],
+        path,
+    )?;
+    if !out.status.success() {
+        return Err(video_err(
+            path,
+            format!("not a readable video: {}", first_line(&out.stderr)),
+        ));
+    }
+    Ok(String::from_utf8_lossy(&out.stdout).into_owned())
+}
+
+/// Stored width, height and the clockwise turn (0, 90, 180 or 270°) that
+/// ffmpeg applies for display, from ffprobe's `key=value` lines; None without a
+/// video stream. The display matrix's `rotation` is counter-clockwise
+/// (libavutil's `av_display_rotation_get`); older files may carry only the
+/// `rotate` tag, which is clockwise. ffmpeg turns frames only by quarter turns
+/// (within 1°); other angles keep the stored size, so they count as 0 here.
+fn parse_stream(text: &str) -> Option<(u32, u32, u32)> {
+    let value = |key: &str| {
+        text.lines()
+            .find_map(|l| l.trim().strip_prefix(key)?.strip_prefix('='))
+            .map(str::trim)
+    };
+    let width: u32 = value("width")?.parse().ok()?;
+    let height: u32 = value("height")?.parse().ok()?;
+    if width == 0 || height == 0 {
+        return None;
+    }
+    let clockwise = match value("rotation").and_then(|v| v.parse::<f64>().ok()) {
+        Some(ccw) => -ccw,
+        None => value("TAG:rotate")
+            .and_then(|v| v.parse::<f64>().ok())
+            .unwrap_or(0.0),
+    };
+    let c = clockwise.rem_euclid(360.0);
+    let turn = [90u32, 180, 270]
+        .into_iter()
+        .find(|&q| (c - q as f64).abs() < 1.0)
+        .unwrap_or(0);
+    Some((width, height, turn))
 }
 
 /// Frame times from ffprobe's packet times (decode order, so sorted here into
@@ -179,6 +206,9 @@ pub struct Frames {
     height: u32,
     stride: usize,
     next: usize,
+    /// The output ended inside a frame: ffmpeg's frames are not of the size
+    /// the probe gave.
+    torn: bool,
 }
 
 /// One decoded frame.
@@ -194,7 +224,7 @@ impl Frames {
     pub fn start(path: &Path, probe: &Probe, stride: usize) -> Result<Frames> {
         let select = format!("select=not(mod(n\\,{stride}))");
         let mut child = Command::new(FFMPEG)
-            .args(["-nostdin", "-v", "error", "-noautorotate", "-i"])
+            .args(["-nostdin", "-v", "error", "-i"])
             .arg(path)
             .args(["-map", "0:v:0", "-vf", &select, "-fps_mode", "passthrough"])
             .args(["-f", "rawvideo", "-pix_fmt", "gray", "-"])
@@ -221,6 +251,7 @@ impl Frames {
             height: probe.height,
             stride,
             next: 0,
+            torn: false,
         })
     }
 
@@ -237,6 +268,7 @@ impl Frames {
             }
         }
         if filled < buf.len() {
+            self.torn = filled > 0;
             return Ok(None);
         }
         let image = image::GrayImage::from_raw(self.width, self.height, buf)
@@ -258,6 +290,15 @@ impl Frames {
             .take()
             .and_then(|h| h.join().ok())
             .unwrap_or_default();
+        if status.success() && self.torn {
+            return Err(video_err(
+                &self.path,
+                format!(
+                    "ffmpeg's frames are not {}x{} as ffprobe said",
+                    self.width, self.height
+                ),
+            ));
+        }
         if status.success() {
             return Ok(());
         }
@@ -286,5 +327,31 @@ mod tests {
     fn packet_times_become_display_order() {
         let t = frame_times("0.066667\n0.000000\n0.033333,\nN/A\n0.1\n");
         assert_eq!(t, vec![0.0, 0.033333, 0.033333, 0.066667, 0.1]);
+    }
+
+    #[test]
+    fn quarter_turns_from_the_display_matrix_or_the_old_tag() {
+        let p = |s: &str| parse_stream(s);
+        assert_eq!(p("width=1920\nheight=1080\n"), Some((1920, 1080, 0)));
+        // Counter-clockwise 90° in the display matrix is a clockwise turn of 270°.
+        assert_eq!(
+            p("width=1920\nheight=1080\nrotation=90\n"),
+            Some((1920, 1080, 270))
+        );
+        assert_eq!(
+            p("width=1920\nheight=1080\nrotation=-90.00\n"),
+            Some((1920, 1080, 90))
+        );
+        assert_eq!(p("width=8\nheight=6\nrotation=180\n"), Some((8, 6, 180)));
+        // Only the legacy tag (clockwise); the matrix wins when both are there.
+        assert_eq!(p("width=8\nheight=6\nTAG:rotate=90\n"), Some((8, 6, 90)));
+        assert_eq!(
+            p("width=8\nheight=6\nrotation=-90\nTAG:rotate=90\n"),
+            Some((8, 6, 90))
+        );
+        // ffmpeg turns only by quarter turns; other angles keep the size.
+        assert_eq!(p("width=8\nheight=6\nrotation=30\n"), Some((8, 6, 0)));
+        assert_eq!(p("width=0\nheight=6\n"), None);
+        assert_eq!(p(""), None);
     }
 }

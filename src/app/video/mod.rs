@@ -77,8 +77,16 @@ pub fn detect_video(
         return Err(Error::Video {
             path: source.path.clone(),
             message: format!(
-                "its frames are {}x{} but camera `{}` is {}x{}",
-                probe.width, probe.height, camera.name, camera.width, camera.height
+                "its frames are {}x{}{} but camera `{}` is {}x{}",
+                probe.width,
+                probe.height,
+                match probe.turned {
+                    0 => String::new(),
+                    t => format!(" (turned by {t}° as its rotation metadata says)"),
+                },
+                camera.name,
+                camera.width,
+                camera.height
             ),
         });
     }
@@ -86,7 +94,9 @@ pub fn detect_video(
         charuco: charuco.cloned(),
         ..Detector::default()
     };
-    let settings = format!("{}; video", photos::settings_key(&detector, target));
+    // "upright": frames have been turned by the rotation metadata since this key;
+    // a cache of frames as stored is not reused.
+    let settings = format!("{}; video upright", photos::settings_key(&detector, target));
     let cache = Cache::load(output_dir, &settings);
     let stamp = std::fs::metadata(&source.path)
         .map(|m| cache::stamp_of(&m))
