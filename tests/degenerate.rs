@@ -102,16 +102,11 @@ fn cauchy_loss_holds_off_outliers_and_reports_them() {
     let (clean, t) = data(Preset::T2, 40, 12, 0.0, 0.0);
     let mut dirty = clean.clone();
     // Displace every 33rd observation (3 %) by 5–10 px.
-    let mut injected = std::collections::HashSet::new();
-    for (i, o) in dirty.observations.iter_mut().enumerate() {
-        if i % 33 == 7 {
-            let a = i as f64 * 2.399;
-            let r = 5.0 + (i % 6) as f64;
-            o.uv[0] += r * a.cos();
-            o.uv[1] += r * a.sin();
-            injected.insert((o.frame, o.corner));
-        }
-    }
+    let injected: std::collections::HashSet<(usize, usize)> = displace_by(&mut dirty, |i| {
+        (i % 33 == 7).then_some(5.0 + (i % 6) as f64)
+    })
+    .into_iter()
+    .collect();
     let cam = &clean.cameras[0];
     // The loss alone: outlier rejection (tested in tests/robustness.rs) is off.
     let reference = run_k(&clean, Method::Standard, Loss::Cauchy, 0.0);

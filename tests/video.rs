@@ -48,6 +48,15 @@ fn have_ffmpeg() -> bool {
     Command::new("ffmpeg").arg("-version").output().is_ok()
 }
 
+/// No ffmpeg: says that the test is skipped.
+fn ffmpeg_missing() -> bool {
+    let missing = !have_ffmpeg();
+    if missing {
+        eprintln!("skipped: no `ffmpeg` on PATH (Debian: apt-get install ffmpeg; CI installs it)");
+    }
+    missing
+}
+
 /// Where the board is held at key frames: (frame, rotation, distance, shift).
 const KEYS: [(usize, [f64; 3], f64, [f64; 2]); 12] = [
     (0, [0.05, 0.0, 0.0], 0.55, [0.0, 0.0]),
@@ -113,9 +122,22 @@ fn frame(i: usize) -> GrayImage {
     })
 }
 
-/// Renders the video and pipes it to ffmpeg as H.264 (near-lossless, as a
-/// good camera records), a few frames at a time.
+/// Renders the video and pipes it to ffmpeg, a few frames at a time.
 fn write_video(path: &Path) {
+    let chunks: Vec<Vec<usize>> = (0..FRAMES)
+        .collect::<Vec<_>>()
+        .chunks(8)
+        .map(<[usize]>::to_vec)
+        .collect();
+    let frames = chunks
+        .into_iter()
+        .flat_map(|c| c.par_iter().map(|&i| frame(i)).collect::<Vec<_>>());
+    encode(path, frames);
+}
+
+/// Writes `frames` (W × H grey) as H.264 at 30 fps, near-lossless as a good
+/// camera records.
+fn encode(path: &Path, frames: impl Iterator<Item = GrayImage>) {
     let mut ff = Command::new("ffmpeg")
         .args(["-v", "error", "-y", "-f", "rawvideo", "-pix_fmt", "gray"])
         .args(["-s", &format!("{W}x{H}"), "-r", "30", "-i", "-"])
@@ -127,11 +149,8 @@ fn write_video(path: &Path) {
         .spawn()
         .expect("start ffmpeg");
     let mut stdin = ff.stdin.take().unwrap();
-    for chunk in (0..FRAMES).collect::<Vec<_>>().chunks(8) {
-        let imgs: Vec<GrayImage> = chunk.par_iter().map(|&i| frame(i)).collect();
-        for img in imgs {
-            stdin.write_all(img.as_raw()).unwrap();
-        }
+    for img in frames {
+        stdin.write_all(img.as_raw()).unwrap();
     }
     drop(stdin);
     assert!(
@@ -195,8 +214,7 @@ fn rows(out: &Path) -> Vec<(usize, f64, String, String)> {
 
 #[test]
 fn chosen_frames_calibrate_at_least_as_well_as_every_tenth() {
-    if !have_ffmpeg() {
-        eprintln!("skipped: no `ffmpeg` on PATH (Debian: apt-get install ffmpeg; CI installs it)");
+    if ffmpeg_missing() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
@@ -373,8 +391,7 @@ fn turn_point(p: [f64; 2], w: u32, h: u32, ccw: i32) -> [f64; 2] {
 #[test]
 fn rotated_videos_come_out_upright() {
     use deformcal::app::video::ffmpeg::{probe, Frames};
-    if !have_ffmpeg() {
-        eprintln!("skipped: no `ffmpeg` on PATH (Debian: apt-get install ffmpeg; CI installs it)");
+    if ffmpeg_missing() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
@@ -384,20 +401,7 @@ fn rotated_videos_come_out_upright() {
         .map(|&i| render_board(&scene_at(i)))
         .collect();
     let plain = dir.path().join("plain.mp4");
-    let mut ff = Command::new("ffmpeg")
-        .args(["-v", "error", "-y", "-f", "rawvideo", "-pix_fmt", "gray"])
-        .args(["-s", &format!("{W}x{H}"), "-r", "30", "-i", "-"])
-        .args(["-c:v", "libx264", "-crf", "10", "-pix_fmt", "yuv420p"])
-        .arg(&plain)
-        .stdin(Stdio::piped())
-        .spawn()
-        .expect("start ffmpeg");
-    let mut stdin = ff.stdin.take().unwrap();
-    for (img, _) in &shots {
-        stdin.write_all(img.as_raw()).unwrap();
-    }
-    drop(stdin);
-    assert!(ff.wait().unwrap().success());
+    encode(&plain, shots.iter().map(|s| s.0.clone()));
     for tag in [0, 90, 180, 270] {
         let video = dir.path().join(format!("rotate{tag}.mp4"));
         let st = Command::new("ffmpeg")

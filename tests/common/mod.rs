@@ -241,15 +241,24 @@ pub fn assert_chained_equals_autodiff(
 /// Moves `percent` % of the observations by `lo`–`hi` px in a spread of
 /// directions (the same ones every run); returns how many moved.
 pub fn displace(d: &mut Dataset, percent: usize, lo: f64, hi: f64) -> usize {
-    let mut n = 0;
+    displace_by(d, |i| {
+        ((i * 7919) % 100 < percent).then(|| lo + (hi - lo) * ((i * 31) % 97) as f64 / 96.0)
+    })
+    .len()
+}
+
+/// Moves observation `i` by `by(i)` px when that is `Some`, each in its own
+/// direction (golden-angle steps, the same every run); returns the (frame,
+/// corner) of those moved.
+pub fn displace_by(d: &mut Dataset, by: impl Fn(usize) -> Option<f64>) -> Vec<(usize, usize)> {
+    let mut moved = Vec::new();
     for (i, o) in d.observations.iter_mut().enumerate() {
-        if (i * 7919) % 100 < percent {
+        if let Some(r) = by(i) {
             let a = i as f64 * 2.399;
-            let r = lo + (hi - lo) * ((i * 31) % 97) as f64 / 96.0;
             o.uv[0] += r * a.cos();
             o.uv[1] += r * a.sin();
-            n += 1;
+            moved.push((o.frame, o.corner));
         }
     }
-    n
+    moved
 }
