@@ -4,7 +4,7 @@ and python3-mrcal) on identical 25-image subsets of the built-in t2 preset.
 
     cargo build --release && bench/compare.py [--subsets 10] [--repeats 3]
 
-For every subset it times deformcal's four methods (and `standard` without the
+For every subset it times deformcal's four methods and `auto` (and `standard` without the
 robust loss, which must reproduce calibrateCamera's intrinsics), OpenCV's calibrateCamera
 (k1, k2, k3) and calibrateCameraRO (Strobl's static method), and mrcal's optimiser
 without and with its board warp (seeding included), then prints each tool's median
@@ -170,7 +170,7 @@ def main():
                 for c in range(ncorners):
                     u, v = views[fr][c]
                     f.write(f"cam0,{fr},{c},{u!r},{v!r}\n")
-        for m, loss in [("standard", "cauchy"), ("standard", "none"), ("static", "cauchy"), ("dynamic", "cauchy"), ("full", "cauchy")]:
+        for m, loss in [("standard", "cauchy"), ("standard", "none"), ("static", "cauchy"), ("dynamic", "cauchy"), ("full", "cauchy"), ("auto", "cauchy")]:
             runs = [run_deformcal(a.deformcal, folder, m, rows, cols, spacing, width, height, loss) for _ in range(a.repeats)]
             k = runs[-1][1]
             name = f"deformcal {m}" + (", no loss" if loss == "none" else "")

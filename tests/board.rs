@@ -780,28 +780,3 @@ fn the_corrections_marginal_information_is_the_inverse_of_their_covariance() {
         assert!(relative < 1e-6, "{method}: relative difference {relative}");
     }
 }
-
-#[test]
-fn the_priors_estimated_together_are_those_estimated_one_by_one() {
-    // `estimate_all` evaluates the Jacobian once for both priors: its σ are each
-    // prior's own estimate, to the bit, and they are real estimates.
-    use deformcal::solver::auto_prior::{estimate_bend_sigma, estimate_static_sigma, AutoPrior};
-    let (data, _) = Generator::new(Preset::T2, Some(25), 7).generate();
-    let settings = SolverSettings::default();
-    let c = run(&data, Method::Full, &settings);
-    let problem = c.problem();
-    let noise = 0.15;
-    let together = AutoPrior::estimate_all(&AutoPrior::ALL, &problem, &c.state, &settings, noise);
-    let alone = vec![
-        estimate_static_sigma(&problem, &c.state, &settings, noise),
-        estimate_bend_sigma(&problem, &c.state, &settings, noise),
-    ];
-    assert_eq!(together, alone);
-    assert!(together
-        .iter()
-        .all(|e| e.is_some_and(|e| e.sigma > 0.0 && e.values > 0)));
-    assert_eq!(
-        AutoPrior::estimate_all(&[], &problem, &c.state, &settings, noise),
-        vec![]
-    );
-}

@@ -426,3 +426,28 @@ fn direct_jacobian_equals_ceres_evaluate() {
         }
     }
 }
+
+#[test]
+fn the_priors_estimated_together_are_those_estimated_one_by_one() {
+    // `estimate_all` evaluates the Jacobian once for both priors: its σ are each
+    // prior's own estimate, to the bit, and they are real estimates.
+    use deformcal::solver::auto_prior::{estimate_bend_sigma, estimate_static_sigma, AutoPrior};
+    let (data, _) = Generator::new(Preset::T2, Some(25), 7).generate();
+    let settings = SolverSettings::default();
+    let c = common::run_with(&data, Method::Full, settings.clone());
+    let problem = c.problem();
+    let noise = 0.15;
+    let together = AutoPrior::estimate_all(&AutoPrior::ALL, &problem, &c.state, &settings, noise);
+    let alone = vec![
+        estimate_static_sigma(&problem, &c.state, &settings, noise),
+        estimate_bend_sigma(&problem, &c.state, &settings, noise),
+    ];
+    assert_eq!(together, alone);
+    assert!(together
+        .iter()
+        .all(|e| e.is_some_and(|e| e.sigma > 0.0 && e.values > 0)));
+    assert_eq!(
+        AutoPrior::estimate_all(&[], &problem, &c.state, &settings, noise),
+        vec![]
+    );
+}
