@@ -51,9 +51,10 @@ pub(super) fn with_auto_priors(
         return Ok(free);
     };
     let problem = method_problem(dataset, request.method, &free.0, &free.1);
+    let all = AutoPrior::estimate_all(&wanted, &problem, state, &request.settings, noise);
     let mut estimates = Vec::new();
-    for prior in wanted {
-        match prior.estimate(&problem, state, &request.settings, noise) {
+    for (prior, estimate) in wanted.into_iter().zip(all) {
+        match estimate {
             Some(e) => estimates.push((prior, e)),
             None => warnings.push(format!(
                 "{} = \"auto\": the solve gives no estimate of the prior's σ; the prior is left off",
