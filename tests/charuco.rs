@@ -352,7 +352,12 @@ fn calibration_from_charuco_photos_matches_truth() {
     for line in obs.lines().skip(1) {
         let f: Vec<&str> = line.split(',').collect();
         let (frame, corner): (usize, usize) = (f[1].parse().unwrap(), f[2].parse().unwrap());
-        let t = truths[frame][corner].expect("a detected corner is in view");
+        let t = truths[frame][corner].unwrap_or_else(|| {
+            panic!(
+                "view {frame}: corner {corner}, detected at ({}, {}), is out of view",
+                f[3], f[4]
+            )
+        });
         exact.push_str(&format!("{},{frame},{corner},{},{}\n", f[0], t[0], t[1]));
     }
     std::fs::write(dir.path().join("exact.csv"), exact).unwrap();
