@@ -244,7 +244,7 @@ fn wave_and_inside(a: f64, b: f64, start: f64, n: usize, s: f64) -> (f64, f64) {
         let t = (x - start).clamp(0.0, w);
         let k = (t / s).floor();
         let r = t - k * s;
-        if k as usize % 2 == 0 {
+        if (k as usize).is_multiple_of(2) {
             r
         } else {
             s - r
