@@ -257,32 +257,46 @@ pub fn svg(args: &Args) -> Result<(String, Layout)> {
         s,
         "<g id=\"board\" transform=\"translate({ox:.4} {oy:.4})\">"
     );
+    let mut black_drawn: Vec<[f64; 4]> = Vec::new();
     for p in &prims {
-        if let Primitive::Rect {
+        let Primitive::Rect {
             x_mm,
             y_mm,
             width_mm,
             height_mm,
             fill,
         } = p
-        {
-            if *fill == Fill::Black {
-                let _ = writeln!(
-                    s,
-                    "<rect x=\"{x_mm:.4}\" y=\"{y_mm:.4}\" width=\"{width_mm:.4}\" height=\"{height_mm:.4}\" fill=\"#000000\"/>"
-                );
-            } else {
-                let _ = writeln!(
-                    s,
-                    "<rect x=\"{x_mm:.4}\" y=\"{y_mm:.4}\" width=\"{width_mm:.4}\" height=\"{height_mm:.4}\" fill=\"#ffffff\"/>"
-                );
-            }
-        }
+        else {
+            continue;
+        };
+        let rect = [*x_mm, *y_mm, *x_mm + *width_mm, *y_mm + *height_mm];
+        let colour = if *fill == Fill::Black {
+            black_drawn.push(rect);
+            "#000000"
+        } else if black_drawn.iter().any(|b| overlap(b, &rect)) {
+            "#ffffff"
+        } else {
+            // White on the white page already. Painting it again makes
+            // anti-aliasing renderers (cairo) cover the seam it shares with a
+            // black square twice, which moves the edge up to 0.25 px into the
+            // black square in a raster of the SVG.
+            continue;
+        };
+        let _ = writeln!(
+            s,
+            "<rect x=\"{x_mm:.4}\" y=\"{y_mm:.4}\" width=\"{width_mm:.4}\" height=\"{height_mm:.4}\" fill=\"{colour}\"/>"
+        );
     }
     s.push_str("</g>\n");
     caption(&mut s, args, &lay, &config);
     s.push_str("</svg>\n");
     Ok((s, lay))
+}
+
+/// Whether two rectangles `[x0, y0, x1, y1]` share some area (a shared edge
+/// alone is no overlap).
+fn overlap(a: &[f64; 4], b: &[f64; 4]) -> bool {
+    a[0] < b[2] && b[0] < a[2] && a[1] < b[3] && b[1] < a[3]
 }
 
 /// The caption block at the page's foot: the board, the config lines, how to
