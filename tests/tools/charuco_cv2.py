@@ -3,7 +3,8 @@
 stdin: {"rows", "cols" (squares), "square", "marker" (metres), "dictionary"
 (OpenCV's name), "images": [png paths]}. stdout: {"corners": [{id: [u, v]}
 per image]} with OpenCV's ChArUco corner ids, and {"layout": {id: [x, y]}}, the
-board's corner positions as OpenCV places them (origin at the outer corner).
+board's corner positions as OpenCV places them (origin at the outer corner),
+and "ms_per_image", the detection's time per image (reading excluded).
 
 OpenCV 4.6's interpolateCornersCharuco returns its corners shifted by (+0.5,
 +0.5) px from the junctions (measured on a fronto-parallel board drawn by
@@ -15,11 +16,14 @@ charges OpenCV with its detector's accuracy and not with that shift.
 """
 import json
 import sys
+import time
 
 import cv2
 import numpy as np
 
 spec = json.load(sys.stdin)
+# One thread, as benches/detect.rs compares it with ours.
+cv2.setNumThreads(1)
 aruco = cv2.aruco
 dictionary = aruco.getPredefinedDictionary(getattr(aruco, spec["dictionary"]))
 board = aruco.CharucoBoard_create(
@@ -46,9 +50,10 @@ def refine(img, markers, cc):
     return cc
 
 
+images = [cv2.imread(path, cv2.IMREAD_GRAYSCALE) for path in spec["images"]]
 out = []
-for path in spec["images"]:
-    img = cv2.imread(path, cv2.IMREAD_GRAYSCALE)
+start = time.perf_counter()
+for img in images:
     corners, ids, _ = aruco.detectMarkers(img, dictionary, parameters=params)
     found = {}
     if ids is not None and len(ids) > 0:
@@ -61,4 +66,9 @@ for path in spec["images"]:
 layout = {
     str(i): [float(p[0]), float(p[1])] for i, p in enumerate(board.chessboardCorners)
 }
-json.dump({"corners": out, "layout": layout}, sys.stdout)
+# Detection alone (reading the images excluded), for benches/detect.rs.
+seconds = time.perf_counter() - start
+json.dump(
+    {"corners": out, "layout": layout, "ms_per_image": 1e3 * seconds / max(1, len(images))},
+    sys.stdout,
+)

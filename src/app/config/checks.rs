@@ -170,16 +170,7 @@ impl Checker<'_> {
 
     /// `[data] photos`, which excludes every other source.
     fn photos(&self, data: &RawData) -> Result<DataSource> {
-        let others = data.observations.is_some()
-            || data.corners_vnl.is_some()
-            || data.synthetic.is_some()
-            || !data.camera_patterns.is_empty();
-        if others || data.images.is_some() || data.seed.is_some() || data.cameras.is_some() {
-            return Err(self.err(
-                "[data] photos excludes observations, corners_vnl, camera_patterns and synthetic data"
-                    .into(),
-            ));
-        }
+        self.alone_in_data(data, "photos")?;
         let patterns = data.photos.clone().expect("caller checked");
         let all: Vec<&String> = match &patterns {
             PhotoPatterns::One(p) => vec![p],
@@ -194,21 +185,47 @@ impl Checker<'_> {
         })
     }
 
+    /// The keys of `[data]` given beside `source` (`photos` or `video`), which
+    /// names every one of them: a source that silently won over another would
+    /// calibrate data the user did not mean.
+    fn alone_in_data(&self, data: &RawData, source: &str) -> Result<()> {
+        let given = [
+            ("photos", data.photos.is_some()),
+            ("video", data.video.is_some()),
+            ("stride", source != "video" && data.stride.is_some()),
+            ("max_frames", source != "video" && data.max_frames.is_some()),
+            ("observations", data.observations.is_some()),
+            ("corners_vnl", data.corners_vnl.is_some()),
+            ("camera_patterns", !data.camera_patterns.is_empty()),
+            ("synthetic", data.synthetic.is_some()),
+            ("images", data.images.is_some()),
+            ("seed", data.seed.is_some()),
+            ("cameras", data.cameras.is_some()),
+        ];
+        let others: Vec<&str> = given
+            .iter()
+            .filter(|(key, present)| *present && *key != source)
+            .map(|(key, _)| *key)
+            .collect();
+        if others.is_empty() {
+            return Ok(());
+        }
+        Err(self.err(format!(
+            "[data] {source} is a data source of its own; remove {} (given beside it)",
+            others
+                .iter()
+                .map(|k| format!("data.{k}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        )))
+    }
+
     /// `[data] video` with its `stride` and `max_frames`, which exclude every other source.
     fn video(&self, data: &RawData) -> Result<DataSource> {
         let Some(path) = &data.video else {
             return Err(self.err("data.stride and data.max_frames apply to `video` only".into()));
         };
-        let others = data.observations.is_some()
-            || data.corners_vnl.is_some()
-            || data.synthetic.is_some()
-            || !data.camera_patterns.is_empty();
-        if others || data.images.is_some() || data.seed.is_some() || data.cameras.is_some() {
-            return Err(self.err(
-                "[data] video excludes photos, observations, corners_vnl, camera_patterns and synthetic data"
-                    .into(),
-            ));
-        }
+        self.alone_in_data(data, "video")?;
         if path.as_os_str().is_empty() {
             return Err(self.err("data.video: the file name must not be empty".into()));
         }

@@ -125,7 +125,25 @@ mod tests {
         ))
         .unwrap_err()
         .to_string();
-        assert!(e.contains("video excludes"), "{e}");
+        assert!(
+            e.contains("[data] video is a data source of its own")
+                && e.contains("remove data.observations ("),
+            "{e}"
+        );
+        // Photos beside a video (or a video's stride) used to win silently.
+        for (extra, key) in [
+            ("video = \"a.mp4\"", "data.video"),
+            ("stride = 2", "data.stride"),
+            ("seed = 3", "data.seed"),
+        ] {
+            let e = parse(&format!("{rig}[data]\nphotos = \"*.png\"\n{extra}\n"))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("[data] photos is a data source of its own") && e.contains(key),
+                "{extra}: {e}"
+            );
+        }
         let e = parse(&format!(
             "{rig}[data]\nobservations = \"o.csv\"\nstride = 2\n"
         ))
