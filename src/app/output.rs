@@ -54,12 +54,14 @@ pub fn write_calibration(dir: &Path, c: &Calibration) -> Result<Written> {
 
 /// [`write_calibration`], the report naming each frame's image file from `labels`.
 ///
-/// The parts run side by side (rayon), in two rounds: first what does not need
-/// the uncertainty figures (the mrcal problem, `outliers.csv`, the uncertainty
+/// The parts run side by side (rayon). The report's advice section, the longest
+/// part, runs beside all the others, which go in two rounds: first what does not
+/// need the uncertainty figures (the mrcal problem, `outliers.csv`, the uncertainty
 /// maps, `board.json` with its own covariance), while a caller's summary may be
 /// computing those figures on the other core; then `calibration.json` with the
-/// exports, and the report, which embeds the maps' own text. No part reads what
-/// another writes, so the files are those of writing them one after the other.
+/// exports, and the rest of the report, which embeds the maps' own text. No part
+/// reads what another writes, so the files are those of writing them one after
+/// the other.
 pub fn write_calibration_labelled(
     dir: &Path,
     c: &Calibration,
@@ -68,6 +70,22 @@ pub fn write_calibration_labelled(
     // Refused before any file is written, as `write_models` would.
     check_model_files(c.dataset.cameras.iter().map(|cam| cam.name.as_str()))?;
     std::fs::create_dir_all(dir).map_err(|e| Error::write(dir, e))?;
+    let (advice, rest) = rayon::join(
+        || html_report::advice::advice_section(c),
+        || write_all_but_report(dir, c, labels),
+    );
+    let (written, page) = rest?;
+    html_report::write_report(dir, page, advice)?;
+    Ok(written)
+}
+
+/// [`write_calibration_labelled`]'s two rounds: every file but the report, and
+/// the report's page but its advice section.
+fn write_all_but_report(
+    dir: &Path,
+    c: &Calibration,
+    labels: &FrameFiles,
+) -> Result<(Written, html_report::page::Page)> {
     let inputs_and_outliers = || -> Result<exports::OptimizationInputs> {
         write_atomic(&dir.join("outliers.csv"), &suspects_csv(c)?)?;
         Ok(exports::optimization_inputs(c))
@@ -90,13 +108,11 @@ pub fn write_calibration_labelled(
     });
     let (inputs, maps) = (inputs?, maps?);
     board?;
-    let (written, report) = rayon::join(
+    let (written, page) = rayon::join(
         || write_models(dir, &CalibrationJson::from(c), &inputs),
-        || html_report::write_calibration_report_with(dir, c, labels, &maps),
+        || html_report::report_page(c, labels, &maps),
     );
-    let written = written?;
-    report?;
-    Ok(written)
+    Ok((written?, page?))
 }
 
 /// Writes a calibration that failed its guard rails: only `FAILED-calibration.json`

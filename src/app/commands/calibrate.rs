@@ -73,6 +73,10 @@ pub fn run_default(args: CalibrateArgs) -> Result<()> {
 
 /// One calibration: `deformcal calibrate`.
 pub fn run(args: CalibrateArgs) -> Result<()> {
+    // The output's threads (rayon's pool) start now, while the data is read and
+    // solved, not when the files are written: on a loaded machine a new thread
+    // waits 1–2 ms for a core.
+    rayon::current_num_threads();
     let (document, config) = flags::config(&args)?;
     // Lock and stage the output before the work: a busy or unwritable output
     // directory fails now, not after a long solve.

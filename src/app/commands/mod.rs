@@ -28,6 +28,10 @@ pub(crate) fn with_progress_line<T>(message: &str, work: impl FnOnce() -> T) -> 
 }
 
 /// [`with_progress_line`] with its delay and draw target given.
+///
+/// The line's thread is waited for only if it drew the line (which it then
+/// clears): after a short step it ends on its own, and the run does not wait
+/// for it to be scheduled (1–2 ms on a loaded machine).
 pub(crate) fn with_progress_after<T>(
     message: &str,
     after: std::time::Duration,
@@ -35,27 +39,61 @@ pub(crate) fn with_progress_after<T>(
     work: impl FnOnce() -> T,
 ) -> T {
     use std::sync::mpsc::{channel, RecvTimeoutError};
+    use std::sync::{Arc, Mutex};
+    // (the work ended, the line was drawn)
+    let state = Arc::new(Mutex::new((false, false)));
     let (done, finished) = channel::<()>();
-    std::thread::scope(|s| {
-        s.spawn(move || {
-            // Dropping `done` (the work ended, or panicked) disconnects the channel.
-            if finished.recv_timeout(after) != Err(RecvTimeoutError::Timeout) {
+    let (shared, message) = (Arc::clone(&state), message.to_string());
+    let draw = move || {
+        // Dropping `done` (the work ended, or panicked) disconnects the channel.
+        if finished.recv_timeout(after) != Err(RecvTimeoutError::Timeout) {
+            return;
+        }
+        {
+            let mut s = shared.lock().unwrap_or_else(|e| e.into_inner());
+            if s.0 {
                 return;
             }
-            let style = indicatif::ProgressStyle::with_template("{spinner} {msg} ({elapsed})")
-                .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner());
-            let line = indicatif::ProgressBar::with_draw_target(None, target)
-                .with_style(style)
-                .with_message(message.to_string())
-                .with_elapsed(after);
-            line.enable_steady_tick(std::time::Duration::from_millis(200));
-            let _ = finished.recv();
-            line.finish_and_clear();
-        });
-        let out = work();
-        drop(done);
-        out
-    })
+            s.1 = true;
+        }
+        let style = indicatif::ProgressStyle::with_template("{spinner} {msg} ({elapsed})")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner());
+        let line = indicatif::ProgressBar::with_draw_target(None, target)
+            .with_style(style)
+            .with_message(message)
+            .with_elapsed(after);
+        line.enable_steady_tick(std::time::Duration::from_millis(200));
+        let _ = finished.recv();
+        line.finish_and_clear();
+    };
+    let thread = std::thread::Builder::new().spawn(draw).ok();
+    let end = End(state, Some(done), thread);
+    let out = work();
+    drop(end);
+    out
+}
+
+/// The end of [`with_progress_after`]'s work, also when it panics: marks it
+/// ended, disconnects the line's thread and waits for it only if it drew the line
+/// (to be cleared before anything else is printed).
+struct End(
+    std::sync::Arc<std::sync::Mutex<(bool, bool)>>,
+    Option<std::sync::mpsc::Sender<()>>,
+    Option<std::thread::JoinHandle<()>>,
+);
+
+impl Drop for End {
+    fn drop(&mut self) {
+        let drawn = {
+            let mut s = self.0.lock().unwrap_or_else(|e| e.into_inner());
+            s.0 = true;
+            s.1
+        };
+        drop(self.1.take());
+        if let (true, Some(thread)) = (drawn, self.2.take()) {
+            let _ = thread.join();
+        }
+    }
 }
 
 /// A progress bar on stderr with `template` (indicatif's syntax).

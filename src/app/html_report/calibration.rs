@@ -35,6 +35,22 @@ pub fn calibration_page(
     labels: &FrameLabels,
     uncertainty: &[Option<Vec<u8>>],
 ) -> Result<String> {
+    let mut p = page_but_advice(c, labels, uncertainty)?;
+    p.fill(ADVICE_SECTION, super::advice::advice_section(c));
+    Ok(p.render())
+}
+
+/// The id of the page's "Where to hold the board next" section.
+pub const ADVICE_SECTION: &str = "advice";
+
+/// [`calibration_page`] with the advice section left empty, to be filled
+/// ([`Page::fill`] with [`ADVICE_SECTION`]) by [`super::advice::advice_section`]:
+/// the longest part of the page, which a caller may compute meanwhile.
+pub fn page_but_advice(
+    c: &Calibration,
+    labels: &FrameLabels,
+    uncertainty: &[Option<Vec<u8>>],
+) -> Result<Page> {
     let d = &c.dataset;
     let lead = format!(
         "Method `{}` on {} image(s) and {} observations of a {} × {} board ({} m squares); {} camera(s).",
@@ -63,13 +79,13 @@ pub fn calibration_page(
         board_section(c)?,
     );
     p.section(
-        "advice",
+        ADVICE_SECTION,
         "Where to hold the board next",
-        super::advice::advice_section(c),
+        String::new(),
     );
     p.section("frames", "Every frame", frames_section(c, &stats, labels));
     p.section("definitions", "Definitions", definitions());
-    Ok(p.render())
+    Ok(p)
 }
 
 /// A view's name: its image file where the source knows it, else its frame number.

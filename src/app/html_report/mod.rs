@@ -19,6 +19,7 @@ use crate::app::fsio::{read_limited, write_atomic};
 use crate::app::lint::FrameFiles as FrameLabels;
 use crate::error::Result;
 use crate::solver::calibrate::Calibration;
+use page::Page;
 use std::path::Path;
 
 /// The report's file name, in every output directory that has one.
@@ -57,10 +58,27 @@ pub fn write_calibration_report_with(
     labels: &FrameLabels,
     maps: &[Option<Vec<u8>>],
 ) -> Result<()> {
+    let page = report_page(c, labels, maps)?;
+    write_report(dir, page, advice::advice_section(c))
+}
+
+/// The page [`write_calibration_report_with`] writes, but for its advice section
+/// ([`advice::advice_section`], given to [`write_report`]), which a caller may
+/// compute on another thread meanwhile.
+pub fn report_page(
+    c: &Calibration,
+    labels: &FrameLabels,
+    maps: &[Option<Vec<u8>>],
+) -> Result<Page> {
     let maps: Vec<Option<Vec<u8>>> = maps
         .iter()
         .map(|m| m.clone().filter(|b| b.len() as u64 <= MAX_EMBEDDED_BYTES))
         .collect();
-    let html = calibration::calibration_page(c, labels, &maps)?;
-    write_atomic(&dir.join(REPORT_FILE), html.as_bytes())
+    calibration::page_but_advice(c, labels, &maps)
+}
+
+/// Writes `page` ([`report_page`]) with its advice section `advice` as `report.html` in `dir`.
+pub fn write_report(dir: &Path, mut page: Page, advice: String) -> Result<()> {
+    page.fill(calibration::ADVICE_SECTION, advice);
+    write_atomic(&dir.join(REPORT_FILE), page.render().as_bytes())
 }

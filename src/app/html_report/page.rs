@@ -151,6 +151,15 @@ impl Page {
         self.sections.push((id_of(id), heading.to_string(), body));
     }
 
+    /// Sets the body of section `id`, added earlier with a placeholder: a section
+    /// computed on another thread keeps its place in the page.
+    pub fn fill(&mut self, id: &str, body: String) {
+        let id = id_of(id);
+        if let Some(section) = self.sections.iter_mut().find(|s| s.0 == id) {
+            section.2 = body;
+        }
+    }
+
     /// The whole page.
     pub fn render(&self) -> String {
         let mut s = String::new();
