@@ -112,9 +112,13 @@ class ChainedReprojection final : public ceres::CostFunction {
     const double* frame = p[kRig ? 2 : 1];
     const double* corner = Board::kCornerSize > 0 ? p[kRig ? 3 : 2] + corner_offset_ : nullptr;
     double X[3];
+    if (jacobians == nullptr) {
+      // The board point without its derivatives (the same value as Point's).
+      Board::Point(x_, frame + kPoseSize, corner, X);
+      return Residual(intrinsics, rig, frame, X, r);
+    }
     double dX[3][Point::kCols] = {};
     Point::Eval(x_, frame + kPoseSize, corner, X, dX);
-    if (jacobians == nullptr) return Residual(intrinsics, rig, frame, X, r);
 
     const RigidChain c(frame, rig, X, rotation_);
     constexpr int kLens = Lens::kNumParams;
