@@ -47,8 +47,15 @@ struct RigidChain {
   double dcam_dxc[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};  // R_k
   double dcam_drig[3][kPoseSize] = {};
 
-  RigidChain(const double* frame, const double* rig, const double* X) {
-    TransformPointWithJacobian(frame, X, xc, R, dxc_dw);
+  // `rotation`: the frame's shared R and J_l (FrameRotation), or null.
+  RigidChain(const double* frame, const double* rig, const double* X, FrameRotation* rotation) {
+    if (rotation != nullptr) {
+      rotation->At(frame);
+      std::copy(rotation->R, rotation->R + 9, R);
+      TransformWithRotation(frame, rotation->R, rotation->Jl, X, xc, dxc_dw);
+    } else {
+      TransformPointWithJacobian(frame, X, xc, R, dxc_dw);
+    }
     std::copy(xc, xc + 3, cam);
     if (rig != nullptr) {
       double dk_dw[9];
@@ -95,17 +102,25 @@ class ChainedReprojection final : public ceres::CostFunction {
     mutable_parameter_block_sizes()->back() = width;
   }
 
+  // Shares the frame's rotation with its other corners' blocks (FrameRotation;
+  // single-threaded solves only: the blocks write it as they evaluate).
+  void ShareRotation(FrameRotation* rotation) { rotation_ = rotation; }
+
   bool Evaluate(double const* const* p, double* r, double** jacobians) const override {
     const double* intrinsics = p[0];
     const double* rig = kRig ? p[1] : nullptr;
     const double* frame = p[kRig ? 2 : 1];
     const double* corner = Board::kCornerSize > 0 ? p[kRig ? 3 : 2] + corner_offset_ : nullptr;
     double X[3];
+    if (jacobians == nullptr) {
+      // The board point without its derivatives (the same value as Point's).
+      Board::Point(x_, frame + kPoseSize, corner, X);
+      return Residual(intrinsics, rig, frame, X, r);
+    }
     double dX[3][Point::kCols] = {};
     Point::Eval(x_, frame + kPoseSize, corner, X, dX);
-    if (jacobians == nullptr) return Residual(intrinsics, rig, frame, X, r);
 
-    const RigidChain c(frame, rig, X);
+    const RigidChain c(frame, rig, X, rotation_);
     constexpr int kLens = Lens::kNumParams;
     double uv[2], duv[2][kLens + 3];
     if (!Lens::ProjectWithJacobian(intrinsics, c.cam, uv, &duv[0][0])) return false;
@@ -143,7 +158,13 @@ class ChainedReprojection final : public ceres::CostFunction {
   bool Residual(const double* intrinsics, const double* rig, const double* frame, const double* X,
                 double* r) const {
     double xc[3], uv[2];
-    TransformPoint(frame, X, xc);
+    if (rotation_ != nullptr) {
+      rotation_->At(frame);
+      const double* R = rotation_->R;
+      for (int i = 0; i < 3; ++i) xc[i] = R[3 * i] * X[0] + R[3 * i + 1] * X[1] + R[3 * i + 2] * X[2] + frame[3 + i];
+    } else {
+      TransformPoint(frame, X, xc);
+    }
     if (kRig) {
       double xk[3];
       TransformPoint(rig, xc, xk);
@@ -192,5 +213,6 @@ class ChainedReprojection final : public ceres::CostFunction {
   double u_, v_, w_;
   double x_[3];
   int corner_offset_ = 0;
+  FrameRotation* rotation_ = nullptr;
 };
 }  // namespace deformcal

@@ -22,6 +22,15 @@ namespace deformcal {
 struct CauchyFold {
   double a2 = 0.0;  // squared scale; 0 means no loss
 
+  // f alone, for a residual without its Jacobian.
+  double Factor(double s) const {
+    if (a2 == 0.0) return 1.0;
+    const double x = s / a2;
+    // rho(s)/s; the closed form cancels near zero, where the series is exact.
+    const double rho_s = x < 1e-6 ? 1.0 - x / 2.0 + x * x / 3.0 : std::log1p(x) / x;
+    return std::sqrt(rho_s);
+  }
+
   // f, and M's tangential and radial factors.
   void Scale(double s, double* f, double* mt, double* mr) const {
     if (a2 == 0.0) {
@@ -30,9 +39,7 @@ struct CauchyFold {
     }
     const double x = s / a2;
     const double drho = 1.0 / (1.0 + x);  // rho'(s)
-    // rho(s)/s; the closed form cancels near zero, where the series is exact.
-    const double rho_s = x < 1e-6 ? 1.0 - x / 2.0 + x * x / 3.0 : std::log1p(x) / x;
-    *f = std::sqrt(rho_s);
+    *f = Factor(s);
     *mt = std::sqrt(drho);
     *mr = drho / *f;
   }
@@ -69,11 +76,16 @@ class FoldedCorner final : public ceres::CostFunction {
     if (!corner_->Evaluate(p, r, jacobians)) return false;
     const double k = *loss_scale_factor_;
     const CauchyFold loss{loss_.a2 * k * k};
+    if (jacobians == nullptr) {
+      const double f = loss.Factor(r[0] * r[0] + r[1] * r[1]);
+      r[0] *= f;
+      r[1] *= f;
+      return true;
+    }
     double f, M[2][2];
     loss.Fold(r, &f, M);
     r[0] *= f;
     r[1] *= f;
-    if (jacobians == nullptr) return true;
     const std::vector<int32_t>& sizes = parameter_block_sizes();
     for (size_t b = 0; b < sizes.size(); ++b) {
       double* J = jacobians[b];

@@ -28,8 +28,10 @@ namespace {
 template <class Board>
 struct LensOps {
   // corner_offset, corner_width: the corner's slot in its correction block.
+  // rotation: the frame's shared rotation (FrameRotation), or null.
   ceres::CostFunction* (*cost)(double u, double v, double w, const double* x, bool rig,
-                               bool reference, int corner_offset, int corner_width);
+                               bool reference, int corner_offset, int corner_width,
+                               FrameRotation* rotation);
   PoseOnlyView* (*view)(const double* intrinsics, const double* rig);
   ViewBlock* (*view_block)(bool rig, CauchyFold loss, std::shared_ptr<const double> loss_scale_factor);
 };
@@ -42,7 +44,8 @@ ViewBlock* MakeViewBlock(bool rig, CauchyFold loss, std::shared_ptr<const double
 
 template <class Lens, class Board>
 ceres::CostFunction* MakeCost(double u, double v, double w, const double* x, bool rig,
-                              bool reference, int corner_offset, int corner_width) {
+                              bool reference, int corner_offset, int corner_width,
+                              FrameRotation* rotation) {
   if (reference) {
     if (corner_width != Board::kCornerSize) Fail("the reference residual has no corner groups");
     return rig ? ReprojectionError<Lens, Board, true>::Create(u, v, w, x)
@@ -50,6 +53,7 @@ ceres::CostFunction* MakeCost(double u, double v, double w, const double* x, boo
   }
   auto place = [&](auto* f) {
     if (corner_width != Board::kCornerSize) f->PlaceCorner(corner_offset, corner_width);
+    f->ShareRotation(rotation);
     return f;
   };
   if (rig) return place(new ChainedReprojection<Lens, Board, true>(u, v, w, x));
@@ -167,6 +171,8 @@ class ResidualAdder {
     fold_corners_ = cauchy && Board::kFrameExtra == 0 && !o.reference_jacobian && !PreviousPath(d, o);
     corner_used_.assign(d.num_corners, false);
     frame_used_.assign(d.num_frames, false);
+    // Blocks share their frame's rotation where one thread evaluates them all.
+    if (o.num_threads <= 1) a.rotations.resize(d.num_frames);
   }
 
   void Run() {
@@ -247,7 +253,8 @@ class ResidualAdder {
     ceres::CostFunction* cost =
         ops_[cam].cost(d_.obs_uv[2 * i], d_.obs_uv[2 * i + 1], Weight(i), &d_.board[3 * corner],
                        rig != nullptr, o_.reference_jacobian, grouped ? Params::GroupOffset(corner) : 0,
-                       grouped ? p_.GroupSize(corner) : Board::kCornerSize);
+                       grouped ? p_.GroupSize(corner) : Board::kCornerSize,
+                       a_.rotations.empty() ? nullptr : &a_.rotations[frame]);
     if (fold_corners_) cost = new FoldedCorner(cost, fold_, a_.loss_scale_factor);
     a_.AddObservations(std::array<uint32_t, 1>{static_cast<uint32_t>(i)}, cost,
                        fold_corners_ ? nullptr : loss_, blocks_);

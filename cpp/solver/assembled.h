@@ -57,6 +57,10 @@ struct Assembled {
   // View blocks go to the problem as CompressedRows (for solving only: their
   // rows are then no observations' residuals; PlainCost reads through them).
   bool compress_views = false;
+  // Per frame, the rotation its corner blocks share (FrameRotation; empty
+  // where several threads evaluate them).  Sized before any block points
+  // into it; a move of the vector keeps its storage.
+  std::vector<FrameRotation> rotations;
 
   // Adds a residual block of `cost` (owned here from now on) over `blocks`.
   template <class... Blocks>

@@ -33,7 +33,12 @@ namespace {
 // 0.01 and 0.001 1.33, 1.21 and 1.16 s (the explicit update costs each image
 // the same as the products of the conjugate gradients, so no size changes
 // this).  So dense stays up to 1200 reduced parameters and iterative Schur is
-// not used.
+// not used.  At 25 images (2026-12-05, docs/benchmarks.md "The protocol") the
+// Schur elimination is two thirds of a `static` or `full` iteration, and
+// nothing tried beat it: sparse normal Cholesky 4x slower, LAPACK no faster,
+// corrections in blocks of 2-8 corners slower, and Ceres' fixed-size kernel
+// (the intrinsics padded to two pose-wide blocks) 10 % faster in the
+// elimination but no faster in all, for the extra block's evaluation.
 void ChooseLinearSolver(const Assembled& a, ceres::Solver::Options& s) {
   ceres::Problem& problem = *a.problem;
   std::vector<double*> all;
