@@ -27,6 +27,14 @@
 //! result's mapping error to the same size and method there (a run of another
 //! build), failing beyond 0.01 px: a change of the solver path must not move
 //! the answer.
+//!
+//! `-- refit N... [method...] [model...]` (default `standard` and `static`,
+//! `radial3`, `opencv5`, `opencv8`, `kb4`) compares, where a calibration
+//! rejected observations, its result with the kept observations fitted afresh
+//! (the rule before a few rejected were solved on): each one's mapping error
+//! to the optimum of the kept observations converged with tolerances of 1e-15
+//! (from both answers, the lower cost kept; how far apart those two ends are),
+//! and the time of each refit.
 use deformcal::model::metrics::mapping_error;
 use deformcal::model::synthetic::{Generator, Preset};
 use deformcal::solver::problem::SolverSettings;

@@ -162,8 +162,9 @@ fn continued(mut first: Calibration) -> Calibration {
     first
 }
 
-/// The largest share of rejected observations after which a `dynamic` or `full`
-/// fit that rejected them stands (see [`without_footprint`]). Measured with
+/// The largest share of rejected observations after which a fit that rejected
+/// them is not fitted again from scratch (see [`without_footprint`]): `dynamic`
+/// and `full` stand, `standard` and `static` are solved on ([`continued`]). Measured with
 /// `cargo bench --bench speed -- growth` (`t2`, `radial3`, 100 to 10 000 images,
 /// 0.01–0.05 % rejected): `full` within 0.0011 px of the fit from scratch; and
 /// by `a_few_rejected_among_thousands_keep_the_fit_that_rejected_them` for five
