@@ -221,14 +221,7 @@ fn a_few_rejected_among_thousands_keep_the_fit_that_rejected_them() {
             if few {
                 kept_fits += 1;
                 assert!(!again, "{what}: fitted again from scratch: {:?}", c.stages);
-                // `standard` and `static` stop early in a flatter valley, the
-                // fit afresh too: the next test holds them to the optimum.
-                let within = if matches!(method, Method::Dynamic | Method::Full) {
-                    0.01
-                } else {
-                    0.05
-                };
-                assert!(apart <= within, "{what}: {apart} px");
+                assert!(apart <= afresh_within(method), "{what}: {apart} px");
                 assert!(kept <= afresh + 0.01, "{what}: {kept} against {afresh} px");
             } else {
                 assert!(apart <= 1e-9, "{what}: {apart} px from the fit afresh");
@@ -278,16 +271,7 @@ fn a_standard_or_static_fit_solved_on_after_a_few_rejected_ends_at_the_optimum()
                 "{what}: {} of {total} rejected",
                 c.rejected.len()
             );
-            // The last stage starts where the one before it (the re-solve
-            // after the rejection) stopped: no fit from scratch came between.
-            let n = c.stages.len();
-            let (last, before) = (&c.stages[n - 1], &c.stages[n - 2]);
-            assert_eq!(last.method, method, "{what}");
-            assert!(
-                (last.initial_cost - before.final_cost).abs() <= 1e-9 * before.final_cost,
-                "{what}: {:?}",
-                c.stages
-            );
+            let last = solved_on_where_it_stopped(&c, &what);
             let fresh = fit(&c.dataset, &request(0.0)).unwrap();
             assert!(
                 last.iterations < fresh.iterations(),
@@ -328,6 +312,31 @@ fn a_standard_or_static_fit_solved_on_after_a_few_rejected_ends_at_the_optimum()
     // Not a coin toss: solving on from next to the optimum ends closer to it
     // more often than not.
     assert!(2 * closer > cases, "closer in {closer} of {cases}");
+}
+
+/// How far a fit that rejected a few may end from the kept observations fitted
+/// afresh: `standard` and `static` stop early in a flatter valley, the fit
+/// afresh too (the next test holds them to the converged optimum).
+fn afresh_within(method: Method) -> f64 {
+    if matches!(method, Method::Dynamic | Method::Full) {
+        0.01
+    } else {
+        0.05
+    }
+}
+
+/// `c`'s last stage, which starts where the one before it (the re-solve after
+/// the rejection) stopped: no fit from scratch came between.
+fn solved_on_where_it_stopped<'a>(c: &'a Calibration, what: &str) -> &'a Stage {
+    let n = c.stages.len();
+    let (last, before) = (&c.stages[n - 1], &c.stages[n - 2]);
+    assert_eq!(last.method, c.method, "{what}");
+    assert!(
+        (last.initial_cost - before.final_cost).abs() <= 1e-9 * before.final_cost,
+        "{what}: {:?}",
+        c.stages
+    );
+    last
 }
 
 /// The optimum of `on`'s problem and settings (rejection off) converged to
