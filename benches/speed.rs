@@ -27,6 +27,14 @@
 //! result's mapping error to the same size and method there (a run of another
 //! build), failing beyond 0.01 px: a change of the solver path must not move
 //! the answer.
+//!
+//! `-- refit N... [method...] [model...]` (default `standard` and `static`,
+//! `radial3`, `opencv5`, `opencv8`, `kb4`) compares, where a calibration
+//! rejected observations, its result with the kept observations fitted afresh
+//! (the rule before a few rejected were solved on): each one's mapping error
+//! to the optimum of the kept observations converged with tolerances of 1e-15
+//! (from both answers, the lower cost kept; how far apart those two ends are),
+//! and the time of each refit.
 use deformcal::model::metrics::mapping_error;
 use deformcal::model::synthetic::{Generator, Preset};
 use deformcal::solver::problem::SolverSettings;
@@ -291,11 +299,110 @@ fn against_saved(n: usize, method: Method, k: &deformcal::Intrinsics, w: u32, h:
     e <= SAME_ANSWER_PX
 }
 
+/// `start`'s state solved on `on`'s problem and settings with tolerances of
+/// 1e-15 (no rejection): its intrinsics and final cost.
+fn tight_from(on: &Calibration, start: &Calibration) -> (deformcal::Intrinsics, f64) {
+    let mut s = on.settings.clone();
+    s.outlier_k = 0.0;
+    s.function_tolerance = 1e-15;
+    s.parameter_tolerance = 1e-15;
+    s.gradient_tolerance = 1e-15;
+    s.max_iterations = 1000;
+    let mut state = start.state.clone();
+    let r = on.problem().solve(&mut state, &s).expect("tight solve");
+    (state.intrinsics[0], r.final_cost)
+}
+
+/// The converged optimum of `on`'s objective: the lower of the tight solves
+/// from `a`'s and `b`'s results, and how far apart the two ended (px).
+fn optimum(on: &Calibration, a: &Calibration, b: &Calibration) -> (deformcal::Intrinsics, f64) {
+    let (ta, ca) = tight_from(on, a);
+    let (tb, cb) = tight_from(on, b);
+    let cam = &on.dataset.cameras[0];
+    let apart = mapping_error(&ta, &tb, cam.width, cam.height);
+    (if ca <= cb { ta } else { tb }, apart)
+}
+
+/// The refit after outlier rejection: for each method, lens model and size,
+/// the library's result, the kept observations fitted afresh, and their
+/// distances to the optimum converged with tolerances of 1e-15.
+fn refit_study(sizes: &[usize], methods: &[Method], models: &[LensModel]) {
+    println!("refit after rejection: t2, seed 7, 1 thread; px to the converged optimum");
+    for &method in methods {
+        for &model in models {
+            for &n in sizes {
+                let (d, _) = Generator::new(Preset::T2, Some(n), 7)
+                    .with_models(&[model])
+                    .generate();
+                let req = request(method, false);
+                let cpu = thread_cpu_ms();
+                let c = deformcal::solver::calibrate::fit(&d, &req).expect("fit");
+                let ms = thread_cpu_ms() - cpu;
+                if c.rejected.is_empty() {
+                    println!("  {method:8} {model:8} {n:6}: nothing rejected ({ms:.0} ms)");
+                    continue;
+                }
+                let last = c.stages.last().expect("a stage");
+                let cont_ms = last.seconds * 1e3;
+                let mut kept = req.clone();
+                kept.settings.outlier_k = 0.0;
+                let cpu = thread_cpu_ms();
+                let fresh = deformcal::solver::calibrate::fit(&c.dataset, &kept).expect("fit");
+                let fresh_ms = thread_cpu_ms() - cpu;
+                assert_eq!(fresh.dataset, c.dataset);
+                let (opt, apart) = optimum(&fresh, &c, &fresh);
+                let cam = &d.cameras[0];
+                let m = |a: &deformcal::Intrinsics, b: &deformcal::Intrinsics| {
+                    mapping_error(a, b, cam.width, cam.height)
+                };
+                let own = if c.settings.board.noise_px != fresh.settings.board.noise_px {
+                    let (o, a) = optimum(&c, &c, &fresh);
+                    format!(
+                        "; own objective: new {:.4} (ends {a:.4} apart), optima {:.4} apart",
+                        m(&c.state.intrinsics[0], &o),
+                        m(&o, &opt)
+                    )
+                } else {
+                    String::new()
+                };
+                println!(
+                    "  {method:8} {model:8} {n:6}: {:4} rej; to opt: new {:.4} afresh {:.4} (ends {apart:.4} apart); new refit {cont_ms:.0} ms ({} it) afresh {fresh_ms:.0} ms; whole {ms:.0} ms{own}",
+                    c.rejected.len(),
+                    m(&c.state.intrinsics[0], &opt),
+                    m(&fresh.state.intrinsics[0], &opt),
+                    last.iterations,
+                );
+            }
+        }
+    }
+}
+
 fn main() {
     let args: Vec<String> = std::env::args()
         .skip(1)
         .filter(|a| !a.starts_with('-'))
         .collect();
+    if args.first().map(String::as_str) == Some("refit") {
+        let sizes: Vec<usize> = args[1..].iter().filter_map(|s| s.parse().ok()).collect();
+        let mut methods: Vec<Method> = args[1..].iter().filter_map(|s| Method::parse(s)).collect();
+        if methods.is_empty() {
+            methods = vec![Method::Standard, Method::Static];
+        }
+        let mut models: Vec<LensModel> = args[1..]
+            .iter()
+            .filter_map(|s| LensModel::ALL.into_iter().find(|m| m.name() == s))
+            .collect();
+        if models.is_empty() {
+            models = vec![
+                LensModel::Radial3,
+                LensModel::OpenCv5,
+                LensModel::OpenCv8,
+                LensModel::Kb4,
+            ];
+        }
+        refit_study(&sizes, &methods, &models);
+        return;
+    }
     if args.first().map(String::as_str) == Some("growth") {
         let sizes: Vec<usize> = args[1..].iter().filter_map(|s| s.parse().ok()).collect();
         let mut methods: Vec<Method> = args[1..].iter().filter_map(|s| Method::parse(s)).collect();

@@ -14,7 +14,8 @@ mod warm;
 use crate::error::Result;
 use crate::model::board::Method;
 use crate::model::dataset::Dataset;
-use crate::solver::problem::SolverSettings;
+use crate::solver::problem::{rmse, SolverSettings};
+use crate::solver::robust;
 use fit::fit_from;
 pub use init::{MIN_CORNERS_PER_IMAGE, MIN_IMAGES};
 use std::sync::OnceLock;
@@ -55,19 +56,24 @@ pub fn fit(dataset: &Dataset, request: &Request) -> Result<Calibration> {
 /// result is the calibration of the kept data, whatever the rejected held.
 /// `first`'s rejected observations, stages and warnings are kept in the record.
 ///
-/// For `dynamic` and `full` a share of at most [`KEEP_FIT_REJECTED_SHARE`]
-/// rejected is no such pull: the loss bounds each outlier's weight, and a few
-/// among thousands do not hold the solve in another minimum, while the fit from
-/// scratch doubled the cost of every large calibration (any large set has a few
-/// corners beyond 4σ). The first fit's last solve, on exactly the kept
-/// observations from next to their optimum, is then the result. Not for
-/// `standard` and `static`, whose optimum on a bending board is flat enough that
-/// where a solve starts moves where it stops: with 4 of 10 140 rejected,
-/// `opencv5` `standard` ended 0.03 px from the fit afresh (both 0.013–0.017 px
-/// from the converged optimum), where `dynamic` and `full` stayed within 0.002 px.
+/// A share of at most [`KEEP_FIT_REJECTED_SHARE`] rejected is no such pull:
+/// the loss bounds each outlier's weight, and a few among thousands do not hold
+/// the solve in another minimum, while the fit from scratch doubled the cost of
+/// every large calibration (any large set has a few corners beyond 4σ). For
+/// `dynamic` and `full` the first fit's last solve, on exactly the kept
+/// observations from next to their optimum, is then the result. `standard` and
+/// `static` have a flatter optimum on a bending board, where a solve stops
+/// early wherever it starts (with 4 of 10 140 rejected, `opencv5` `standard`'s
+/// first fit and the fit afresh ended 0.03 px apart, each 0.013–0.017 px from
+/// the converged optimum), so theirs is solved on from where it stopped
+/// ([`continued`]), which ends as close to that optimum as a fit from scratch
+/// at a fraction of its cost.
 fn without_footprint(first: Calibration, request: &Request) -> Result<Calibration> {
     if first.rejected.is_empty() || keeps_first_fit(&first, request) {
         return Ok(first);
+    }
+    if few_rejected(&first) && matches!(request.method, Method::Standard | Method::Static) {
+        return Ok(continued(first));
     }
     let kept = Request {
         settings: SolverSettings {
@@ -115,8 +121,50 @@ fn without_footprint(first: Calibration, request: &Request) -> Result<Calibratio
     Ok(fresh)
 }
 
-/// The largest share of rejected observations after which a `dynamic` or `full`
-/// fit that rejected them stands (see [`without_footprint`]). Measured with
+/// `first`'s method solved on from its result, on the observations it kept,
+/// with rejection off and the request's tolerances: the re-solve after the
+/// rejection stopped after one step ([`robust::reject_outliers`]), and the
+/// solve of the kept observations goes on until its tolerances stop it, as a
+/// fit of them from scratch does. Its stage is recorded after the first fit's.
+/// A solve that fails leaves the first fit standing, with a warning.
+fn continued(mut first: Calibration) -> Calibration {
+    let settings = SolverSettings {
+        outlier_k: 0.0,
+        ..first.settings.clone()
+    };
+    let mut state = first.state.clone();
+    let report = first.problem().solve(&mut state, &settings).and_then(|r| {
+        robust::check_stage(first.method, &r, false)?;
+        Ok(r)
+    });
+    let report = match report {
+        Ok(r) => r,
+        Err(e) => {
+            first.warnings.push(format!(
+                "the solve on the observations kept after outlier rejection failed ({e}); \
+                 this result is the re-solve right after the rejection"
+            ));
+            return first;
+        }
+    };
+    first.stages.push(Stage::new(first.method, &report));
+    if !report.converged {
+        first.warnings.push(format!(
+            "the {} solve did not converge: {}",
+            first.method, report.message
+        ));
+    }
+    first.state = state;
+    first.rmse_px = rmse(&report.residuals);
+    first.residuals = report.residuals;
+    first.converged = report.converged;
+    first.seconds += report.seconds;
+    first
+}
+
+/// The largest share of rejected observations after which a fit that rejected
+/// them is not fitted again from scratch (see [`without_footprint`]): `dynamic`
+/// and `full` stand, `standard` and `static` are solved on ([`continued`]). Measured with
 /// `cargo bench --bench speed -- growth` (`t2`, `radial3`, 100 to 10 000 images,
 /// 0.01–0.05 % rejected): `full` within 0.0011 px of the fit from scratch; and
 /// by `a_few_rejected_among_thousands_keep_the_fit_that_rejected_them` for five
@@ -124,11 +172,15 @@ fn without_footprint(first: Calibration, request: &Request) -> Result<Calibratio
 /// the fit from scratch.
 pub const KEEP_FIT_REJECTED_SHARE: f64 = 1e-3;
 
-/// Whether `first` (its request's method) stands without a fit from scratch.
+/// Whether `first` (its request's method) stands as it is, without a fit from scratch.
 fn keeps_first_fit(first: &Calibration, request: &Request) -> bool {
+    matches!(request.method, Method::Dynamic | Method::Full) && few_rejected(first)
+}
+
+/// Whether `first` rejected at most [`KEEP_FIT_REJECTED_SHARE`] of its observations.
+fn few_rejected(first: &Calibration) -> bool {
     let total = first.dataset.observations.len() + first.rejected.len();
-    matches!(request.method, Method::Dynamic | Method::Full)
-        && first.rejected.len() as f64 <= KEEP_FIT_REJECTED_SHARE * total as f64
+    first.rejected.len() as f64 <= KEEP_FIT_REJECTED_SHARE * total as f64
 }
 
 /// One warm start per dataset, computed by the first calibration that can use

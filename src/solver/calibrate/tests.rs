@@ -3,7 +3,7 @@ use super::init::initialise;
 use super::warm::from_second_start;
 use super::*;
 use crate::model::board::Method;
-use crate::model::lens::LensModel;
+use crate::model::lens::{Intrinsics, LensModel};
 use crate::model::metrics::{mapping_error, mapping_error_rot};
 use crate::model::synthetic::{Generator, Preset};
 use crate::solver::problem::Problem;
@@ -151,7 +151,9 @@ fn a_shared_warm_start_gives_each_method_what_fit_gives() {
 /// fisheye views hold fewer corners, and it rejects more): a
 /// `dynamic` or `full` fit that rejected them stands, without the second fit
 /// from scratch, within 0.01 px of that fit's answer and as close to the true
-/// lens; `standard` and `static` still give the fit from scratch (to 1e-9 px).
+/// lens; a `standard` or `static` fit is solved on from where it stopped
+/// ([`continued`]), within 0.05 px of the fit from scratch (both stop early:
+/// see the next test).
 #[test]
 fn a_few_rejected_among_thousands_keep_the_fit_that_rejected_them() {
     let models = [
@@ -216,17 +218,149 @@ fn a_few_rejected_among_thousands_keep_the_fit_that_rejected_them() {
                  px, afresh {afresh:.4} px",
                 c.rejected.len()
             );
-            if few && matches!(method, Method::Dynamic | Method::Full) {
+            if few {
                 kept_fits += 1;
                 assert!(!again, "{what}: fitted again from scratch: {:?}", c.stages);
-                assert!(apart <= 0.01, "{what}: {apart} px");
+                assert!(apart <= afresh_within(method), "{what}: {apart} px");
                 assert!(kept <= afresh + 0.01, "{what}: {kept} against {afresh} px");
             } else {
                 assert!(apart <= 1e-9, "{what}: {apart} px from the fit afresh");
             }
         }
     }
-    assert!(kept_fits >= 8, "{kept_fits} fits kept");
+    assert!(kept_fits >= 16, "{kept_fits} fits kept");
+}
+
+/// After a few rejected among thousands, a `standard` or `static` fit solved
+/// on from where it stopped ([`continued`]) ends as close to the converged
+/// optimum of the kept observations (a solve to tolerances of 1e-15 from both
+/// answers, the lower kept) as those observations fitted from scratch: closer
+/// in most cases, and never more than 0.005 px farther (both stop on the same
+/// tolerances in a flat valley: `opencv5` `standard` 0.018 px from it after 6
+/// iterations, the fit afresh 0.013 px after 11), in fewer iterations than
+/// that fit takes, and as close to the true lens.
+#[test]
+fn a_standard_or_static_fit_solved_on_after_a_few_rejected_ends_at_the_optimum() {
+    let models = [
+        LensModel::Radial3,
+        LensModel::OpenCv5,
+        LensModel::OpenCv8,
+        LensModel::Kb4,
+    ];
+    let (mut closer, mut cases) = (0, 0);
+    for (k, model) in models.into_iter().enumerate() {
+        let (mut dataset, truth) = Generator::new(Preset::T2, Some(60), 5 + k as u64)
+            .with_models(&[model])
+            .generate();
+        displace_three(&mut dataset);
+        for method in [Method::Standard, Method::Static] {
+            let what = format!("{model} {method}");
+            let request = |outlier_k| Request {
+                method,
+                settings: SolverSettings {
+                    outlier_k,
+                    ..SolverSettings::default()
+                },
+                gauge: None,
+            };
+            let c = fit(&dataset, &request(4.0)).unwrap();
+            let total = c.dataset.observations.len() + c.rejected.len();
+            assert!(
+                c.rejected.len() >= 3
+                    && c.rejected.len() as f64 <= KEEP_FIT_REJECTED_SHARE * total as f64,
+                "{what}: {} of {total} rejected",
+                c.rejected.len()
+            );
+            let last = solved_on_where_it_stopped(&c, &what);
+            let fresh = fit(&c.dataset, &request(0.0)).unwrap();
+            assert!(
+                last.iterations < fresh.iterations(),
+                "{what}: {} iterations against {} afresh",
+                last.iterations,
+                fresh.iterations()
+            );
+            let cam = &dataset.cameras[0];
+            let optimum = converged_optimum(&fresh, &[&c, &fresh]);
+            let to = |k: &Intrinsics| mapping_error(k, &optimum, cam.width, cam.height);
+            let (solved_on, afresh) = (to(&c.state.intrinsics[0]), to(&fresh.state.intrinsics[0]));
+            let to_truth = |c: &Calibration| {
+                mapping_error_rot(
+                    &truth.intrinsics[0],
+                    &c.state.intrinsics[0],
+                    cam.width,
+                    cam.height,
+                )
+            };
+            eprintln!(
+                "{what}: {} rejected; to the converged optimum {solved_on:.5} px in {} iterations, \
+                 afresh {afresh:.5} px in {}; to the truth {:.4} and {:.4} px",
+                c.rejected.len(),
+                last.iterations,
+                fresh.iterations(),
+                to_truth(&c),
+                to_truth(&fresh)
+            );
+            assert!(
+                solved_on <= afresh + 0.005,
+                "{what}: {solved_on} against {afresh} px"
+            );
+            assert!(to_truth(&c) <= to_truth(&fresh) + 0.01, "{what}");
+            cases += 1;
+            closer += usize::from(solved_on <= afresh);
+        }
+    }
+    // Not a coin toss: solving on from next to the optimum ends closer to it
+    // more often than not.
+    assert!(2 * closer > cases, "closer in {closer} of {cases}");
+}
+
+/// How far a fit that rejected a few may end from the kept observations fitted
+/// afresh: `standard` and `static` stop early in a flatter valley, the fit
+/// afresh too (the next test holds them to the converged optimum).
+fn afresh_within(method: Method) -> f64 {
+    if matches!(method, Method::Dynamic | Method::Full) {
+        0.01
+    } else {
+        0.05
+    }
+}
+
+/// `c`'s last stage, which starts where the one before it (the re-solve after
+/// the rejection) stopped: no fit from scratch came between.
+fn solved_on_where_it_stopped<'a>(c: &'a Calibration, what: &str) -> &'a Stage {
+    let n = c.stages.len();
+    let (last, before) = (&c.stages[n - 1], &c.stages[n - 2]);
+    assert_eq!(last.method, c.method, "{what}");
+    assert!(
+        (last.initial_cost - before.final_cost).abs() <= 1e-9 * before.final_cost,
+        "{what}: {:?}",
+        c.stages
+    );
+    last
+}
+
+/// The optimum of `on`'s problem and settings (rejection off) converged to
+/// tolerances of 1e-15 from each of `starts`' results, the lowest cost kept:
+/// its camera's intrinsics.
+fn converged_optimum(on: &Calibration, starts: &[&Calibration]) -> Intrinsics {
+    let settings = SolverSettings {
+        outlier_k: 0.0,
+        function_tolerance: 1e-15,
+        parameter_tolerance: 1e-15,
+        gradient_tolerance: 1e-15,
+        max_iterations: 1000,
+        ..on.settings.clone()
+    };
+    let mut best = (f64::INFINITY, on.state.intrinsics[0]);
+    for start in starts {
+        assert_eq!(start.dataset, on.dataset, "the same observations");
+        let mut state = start.state.clone();
+        let report = on.problem().solve(&mut state, &settings).unwrap();
+        if report.final_cost < best.0 {
+            best = (report.final_cost, state.intrinsics[0]);
+        }
+    }
+    best.1
 }
 
 /// Moves three corners 12 px; their (frame id, corner).
