@@ -61,9 +61,9 @@ fn derivatives(p: &[f64], xc: &Vector3<f64>) -> Option<PointDerivatives> {
     // ∂θd/∂k_i = θ^(2i+3).
     let t2 = theta * theta;
     let mut power = theta * t2;
-    for i in 0..4 {
-        d_params[0][i] = xc.x * power / r;
-        d_params[1][i] = xc.y * power / r;
+    let [dx, dy] = &mut d_params;
+    for (ux, uy) in dx.iter_mut().zip(dy.iter_mut()).take(4) {
+        [*ux, *uy] = [xc.x * power / r, xc.y * power / r];
         power *= t2;
     }
     Some(PointDerivatives {
