@@ -320,9 +320,11 @@ pub fn projection_uncertainty_map(
     for r in 0..rows {
         for c in 0..columns {
             let px = map.centre(c, r);
+            // The closed-form derivatives: one projection per cell.
             let value = k
                 .unproject(&px)
-                .and_then(|ray| jacobian_rows(k, &ray))
+                .and_then(|ray| k.project_with_derivatives(&ray))
+                .map(|d| d.d_params)
                 .map(|j| {
                     let s = propagate(&j, sigma);
                     s.symmetric_eigenvalues().max().max(0.0).sqrt()

@@ -2,12 +2,19 @@
 //! 180°, Kalibr `ds-none` (`cpp/lens/ds.h` is its C++ side).
 use super::info::{KalibrForm, LensInfo};
 use super::intrinsics::Intrinsics;
-use super::projection::Projection;
-use nalgebra::{Vector2, Vector3};
+use super::projection::{PointDerivatives, Projection, MAX_DISTORTION};
+use nalgebra::{Matrix2x3, Vector2, Vector3};
 
 /// m = (x, y) / (α d2 + (1 − α) zz) with zz = ξ d1 + z; `None` outside the
 /// model's domain (Usenko et al., eq. 43).
 fn project(p: &[f64], xc: &Vector3<f64>) -> Option<Vector2<f64>> {
+    let (_, _, _, m) = denominator(p, xc)?;
+    Some(Vector2::new(xc.x / m, xc.y / m))
+}
+
+/// The pieces of the projection's denominator: d1 = |x|, zz = ξ d1 + z,
+/// d2 = |(x, y, zz)| and m = α d2 + (1 − α) zz; `None` outside the valid domain.
+fn denominator(p: &[f64], xc: &Vector3<f64>) -> Option<(f64, f64, f64, f64)> {
     let (xi, alpha) = (p[4], p[5]);
     let d1 = xc.norm();
     let zz = xi * d1 + xc.z;
@@ -21,8 +28,37 @@ fn project(p: &[f64], xc: &Vector3<f64>) -> Option<Vector2<f64>> {
     if xc.z <= -w2 * d1 {
         return None;
     }
-    let m = alpha * d2 + (1.0 - alpha) * zz;
-    Some(Vector2::new(xc.x / m, xc.y / m))
+    Some((d1, zz, d2, alpha * d2 + (1.0 - alpha) * zz))
+}
+
+/// [`project`] with its derivatives: m = (x, y)/M, so ∂m = (∂(x, y) − m ∂M)/M.
+fn derivatives(p: &[f64], xc: &Vector3<f64>) -> Option<PointDerivatives> {
+    let (xi, alpha) = (p[4], p[5]);
+    let (d1, zz, d2, m) = denominator(p, xc)?;
+    let value = Vector2::new(xc.x / m, xc.y / m);
+    let g_zz = xc * (xi / d1) + Vector3::z();
+    let g_d2 = (Vector3::new(xc.x, xc.y, 0.0) + g_zz * zz) / d2;
+    let g_m = g_d2 * alpha + g_zz * (1.0 - alpha);
+    let d_input = Matrix2x3::new(
+        (1.0 - value.x * g_m.x) / m,
+        -value.x * g_m.y / m,
+        -value.x * g_m.z / m,
+        -value.y * g_m.x / m,
+        (1.0 - value.y * g_m.y) / m,
+        -value.y * g_m.z / m,
+    );
+    // ∂M/∂ξ = α zz d1/d2 + (1 − α) d1, ∂M/∂α = d2 − zz.
+    let by = [alpha * zz * d1 / d2 + (1.0 - alpha) * d1, d2 - zz];
+    let mut d_params = [[0.0; MAX_DISTORTION]; 2];
+    for (i, dm) in by.into_iter().enumerate() {
+        d_params[0][i] = -value.x * dm / m;
+        d_params[1][i] = -value.y * dm / m;
+    }
+    Some(PointDerivatives {
+        value,
+        d_input,
+        d_params,
+    })
 }
 
 /// The closed-form inverse (Usenko et al., eqs. 46–49).
@@ -66,7 +102,11 @@ pub(super) const INFO: LensInfo = LensInfo {
     params: &["fx", "fy", "cx", "cy", "xi", "alpha"],
     help: "double sphere (Usenko et al. 2018), beyond 180°",
     pinhole_like: false,
-    projection: Projection::Central { project, unproject },
+    projection: Projection::Central {
+        project,
+        unproject,
+        derivatives,
+    },
     // A stereographic lens (ξ = 0, α = ½), which has the focal length fx at the
     // image centre.
     undistorted: &[0.0, 0.5],

@@ -158,7 +158,7 @@ impl Intrinsics {
     pub fn normalised(&self, xc: &Vector3<f64>) -> Option<Vector2<f64>> {
         let p = self.params();
         match self.model.info().projection {
-            Projection::PinholeLike(distort) => {
+            Projection::PinholeLike { distort, .. } => {
                 if xc.z <= 0.0 {
                     return None;
                 }
@@ -175,7 +175,7 @@ impl Intrinsics {
         let p = self.params();
         let m = Vector2::new((uv.x - p[2]) / p[0], (uv.y - p[3]) / p[1]);
         let ray = match self.model.info().projection {
-            Projection::PinholeLike(distort) => {
+            Projection::PinholeLike { distort, .. } => {
                 let n = pinhole_like::undistort(distort, p, &m)?;
                 Vector3::new(n.x, n.y, 1.0)
             }

@@ -1,8 +1,8 @@
 //! `kb4`: Kannala-Brandt equidistant fisheye, OpenCV `fisheye`, ROS
 //! `equidistant`, Kalibr `pinhole-equi` (`cpp/lens/kb4.h` is its C++ side).
 use super::info::{ColmapForm, KalibrForm, LensInfo, OpenCvForm};
-use super::projection::Projection;
-use nalgebra::{Vector2, Vector3};
+use super::projection::{PointDerivatives, Projection, MAX_DISTORTION};
+use nalgebra::{Matrix2x3, Vector2, Vector3};
 
 /// m = (x, y) θd(θ) / r with θ = atan2(r, z); (x, y) / z on the axis.
 fn project(p: &[f64], xc: &Vector3<f64>) -> Option<Vector2<f64>> {
@@ -21,6 +21,58 @@ fn project(p: &[f64], xc: &Vector3<f64>) -> Option<Vector2<f64>> {
 }
 
 /// The ray at θ(|m|) in the direction of m.
+/// [`project`] with its derivatives. m = (x, y) s with s = θd(θ)/r, θ = atan2(r, z):
+/// ∇s = θd′(θ) ∇θ / r − θd ∇r / r², ∇r = (x, y, 0)/r, ∇θ = (z x/r, z y/r, −r)/ρ²
+/// (ρ² = r² + z²). The (x, y) parts of the two terms nearly cancel close to the
+/// axis; their difference times x or y stays within a few ulps of s.
+fn derivatives(p: &[f64], xc: &Vector3<f64>) -> Option<PointDerivatives> {
+    let mut d_params = [[0.0; MAX_DISTORTION]; 2];
+    let r2 = xc.x * xc.x + xc.y * xc.y;
+    if r2 < 1e-30 * xc.z * xc.z {
+        if xc.z <= 0.0 {
+            return None;
+        }
+        // The pinhole's derivatives: θd's higher terms vanish to third order.
+        let value = Vector2::new(xc.x / xc.z, xc.y / xc.z);
+        let iz = 1.0 / xc.z;
+        let d_input = Matrix2x3::new(iz, 0.0, -value.x * iz, 0.0, iz, -value.y * iz);
+        return Some(PointDerivatives {
+            value,
+            d_input,
+            d_params,
+        });
+    }
+    let r = r2.sqrt();
+    let theta = r.atan2(xc.z);
+    let td = theta_d(p, theta);
+    let s = td / r;
+    let rho2 = r2 + xc.z * xc.z;
+    let slope = theta_d_slope(p, theta);
+    let a = slope * xc.z / (r2 * rho2) - td / (r2 * r);
+    let grad = Vector3::new(a * xc.x, a * xc.y, -slope / rho2);
+    let d_input = Matrix2x3::new(
+        s + xc.x * grad.x,
+        xc.x * grad.y,
+        xc.x * grad.z,
+        xc.y * grad.x,
+        s + xc.y * grad.y,
+        xc.y * grad.z,
+    );
+    // ∂θd/∂k_i = θ^(2i+3).
+    let t2 = theta * theta;
+    let mut power = theta * t2;
+    let [dx, dy] = &mut d_params;
+    for (ux, uy) in dx.iter_mut().zip(dy.iter_mut()).take(4) {
+        [*ux, *uy] = [xc.x * power / r, xc.y * power / r];
+        power *= t2;
+    }
+    Some(PointDerivatives {
+        value: Vector2::new(xc.x * s, xc.y * s),
+        d_input,
+        d_params,
+    })
+}
+
 fn unproject(p: &[f64], m: &Vector2<f64>) -> Option<Vector3<f64>> {
     let theta_d = m.norm();
     if theta_d < 1e-15 {
@@ -38,11 +90,14 @@ fn theta_d(p: &[f64], theta: f64) -> f64 {
 }
 
 /// The angle θ ∈ [0, π) with θd(θ) = `target` on the increasing branch.
+/// dθd/dθ.
+fn theta_d_slope(p: &[f64], theta: f64) -> f64 {
+    let t2 = theta * theta;
+    1.0 + t2 * (3.0 * p[4] + t2 * (5.0 * p[5] + t2 * (7.0 * p[6] + t2 * 9.0 * p[7])))
+}
+
 fn theta_of(p: &[f64], target: f64) -> Option<f64> {
-    let slope = |t: f64| {
-        let t2 = t * t;
-        1.0 + t2 * (3.0 * p[4] + t2 * (5.0 * p[5] + t2 * (7.0 * p[6] + t2 * 9.0 * p[7])))
-    };
+    let slope = |t: f64| theta_d_slope(p, t);
     let mut theta = target.min(3.0);
     for _ in 0..100 {
         let g = slope(theta);
@@ -66,7 +121,11 @@ pub(super) const INFO: LensInfo = LensInfo {
     params: &["fx", "fy", "cx", "cy", "k1", "k2", "k3", "k4"],
     help: "Kannala-Brandt equidistant fisheye (OpenCV fisheye)",
     pinhole_like: false,
-    projection: Projection::Central { project, unproject },
+    projection: Projection::Central {
+        project,
+        unproject,
+        derivatives,
+    },
     undistorted: &[0.0; 4],
     // A fisheye whose image corners lie about 95° off axis.
     synthetic: &[690.0, 689.2, 971.6, 606.4, 0.02, -0.012, 0.004, -6e-4],

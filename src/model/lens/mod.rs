@@ -11,6 +11,7 @@
 //! names no model. The C++ core has the same models, one header each, in
 //! `cpp/lens/`; a test checks that both projections agree for every model, and
 //! `tests.rs` that every entry is complete.
+mod derivatives;
 mod ds;
 mod info;
 mod intrinsics;
@@ -25,10 +26,13 @@ mod projection;
 mod radial3;
 mod registry;
 
+pub use derivatives::PixelDerivatives;
 pub use info::{ColmapForm, KalibrForm, LensInfo, OpenCvForm};
 pub use intrinsics::Intrinsics;
 pub use model::{LensModel, MAX_PARAMS};
-pub use projection::Projection;
+pub use projection::{
+    Derivatives, DistortionDerivatives, PointDerivatives, Projection, MAX_DISTORTION,
+};
 
 #[cfg(test)]
 mod tests;

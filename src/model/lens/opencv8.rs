@@ -1,8 +1,8 @@
 //! `opencv8`: OpenCV's rational model, ROS `rational_polynomial`, mrcal
 //! `LENSMODEL_OPENCV8` (`cpp/lens/opencv8.h` is its C++ side).
 use super::info::LensInfo;
-use super::opencv_family::{self as cv, radial, with_tangential};
-use super::projection::Projection;
+use super::opencv_family::{self as cv, radial, radial_slope, with_tangential};
+use super::projection::{DistortionDerivatives, Projection};
 use nalgebra::Vector2;
 
 /// OpenCV's distortion with the radial factor (1 + k1 r² + k2 r⁴ + k3 r⁶) /
@@ -13,6 +13,27 @@ fn distort(p: &[f64], x: f64, y: f64) -> Vector2<f64> {
     with_tangential(p, x, y, r2, d)
 }
 
+/// [`distort`] with its derivatives: d = N/D, so ∂d = (∂N − d ∂D)/D.
+fn derivatives(p: &[f64], x: f64, y: f64) -> DistortionDerivatives {
+    let r2 = x * x + y * y;
+    let (num, den) = (radial(r2, p[4], p[5], p[8]), radial(r2, p[9], p[10], p[11]));
+    let d = num / den;
+    let slope =
+        (radial_slope(r2, p[4], p[5], p[8]) - d * radial_slope(r2, p[9], p[10], p[11])) / den;
+    let powers = [r2, r2 * r2, r2 * r2 * r2];
+    let value = with_tangential(p, x, y, r2, d);
+    let (n, m) = (|i: usize| powers[i] / den, |i: usize| -d * powers[i] / den);
+    let radial = [
+        (0, n(0)),
+        (1, n(1)),
+        (4, n(2)),
+        (5, m(0)),
+        (6, m(1)),
+        (7, m(2)),
+    ];
+    cv::derivatives(p, (x, y, r2), (value, d, slope), &radial, true)
+}
+
 pub(super) const INFO: LensInfo = LensInfo {
     name: "opencv8",
     params: &[
@@ -20,7 +41,10 @@ pub(super) const INFO: LensInfo = LensInfo {
     ],
     help: "OpenCV's rational model (ROS rational_polynomial)",
     pinhole_like: true,
-    projection: Projection::PinholeLike(distort),
+    projection: Projection::PinholeLike {
+        distort,
+        derivatives,
+    },
     undistorted: &[0.0; 8],
     // A 112° (diagonal) wide-angle lens: a narrow lens cannot determine the
     // rational terms.

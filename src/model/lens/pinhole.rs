@@ -1,12 +1,21 @@
 //! `pinhole`: a pinhole camera without distortion, for lenses whose distortion
 //! is below the noise (`cpp/lens/pinhole.h` is its C++ side).
 use super::info::{ColmapForm, KalibrForm, LensInfo, OpenCvForm};
-use super::projection::Projection;
-use nalgebra::Vector2;
+use super::projection::{DistortionDerivatives, Projection, MAX_DISTORTION};
+use nalgebra::{Matrix2, Vector2};
 
 /// No distortion: (x', y') itself.
 fn distort(_: &[f64], x: f64, y: f64) -> Vector2<f64> {
     Vector2::new(x, y)
+}
+
+/// [`distort`] with its derivatives: the identity.
+fn derivatives(_: &[f64], x: f64, y: f64) -> DistortionDerivatives {
+    DistortionDerivatives {
+        value: Vector2::new(x, y),
+        d_input: Matrix2::identity(),
+        d_params: [[0.0; MAX_DISTORTION]; 2],
+    }
 }
 
 pub(super) const INFO: LensInfo = LensInfo {
@@ -14,7 +23,10 @@ pub(super) const INFO: LensInfo = LensInfo {
     params: &["fx", "fy", "cx", "cy"],
     help: "a pinhole camera without distortion",
     pinhole_like: true,
-    projection: Projection::PinholeLike(distort),
+    projection: Projection::PinholeLike {
+        distort,
+        derivatives,
+    },
     undistorted: &[],
     // The simulated 17 mm lens of radial3, without its distortion.
     synthetic: &[2901.0, 2899.5, 975.3, 601.8],

@@ -88,7 +88,7 @@ fn every_registry_entry_is_complete() {
         assert!(!i.help.is_empty(), "{m}: help");
         assert_eq!(
             i.pinhole_like,
-            matches!(i.projection, Projection::PinholeLike(_)),
+            matches!(i.projection, Projection::PinholeLike { .. }),
             "{m}: pinhole_like"
         );
         assert_eq!(i.undistorted.len(), i.params.len() - 4, "{m}: undistorted");
