@@ -291,11 +291,7 @@ fn per_view_blocks_and_warm_up_reach_the_per_corner_optimum() {
             let settings = SolverSettings {
                 per_corner_blocks,
                 outlier_k: 0.0,
-                function_tolerance: 1e-14,
-                parameter_tolerance: 1e-12,
-                gradient_tolerance: 1e-14,
-                max_iterations: 500,
-                ..SolverSettings::default()
+                ..converged()
             };
             run_with(&d, m, settings)
         };
@@ -414,11 +410,7 @@ fn a_loss_free_warm_up_of_a_fresh_bend_stage_reaches_the_same_optimum() {
         let mut state = start.state.clone();
         let settings = SolverSettings {
             warm_up,
-            function_tolerance: 1e-14,
-            parameter_tolerance: 1e-12,
-            gradient_tolerance: 1e-14,
-            max_iterations: 500,
-            ..SolverSettings::default()
+            ..converged()
         };
         let report = problem.solve(&mut state, &settings).unwrap();
         assert!(report.converged, "{}", report.message);
@@ -480,11 +472,7 @@ fn shared_frame_rotations_reach_the_same_optimum() {
             let solve = |threads: usize| {
                 let settings = SolverSettings {
                     threads,
-                    function_tolerance: 1e-14,
-                    parameter_tolerance: 1e-12,
-                    gradient_tolerance: 1e-14,
-                    max_iterations: 500,
-                    ..SolverSettings::default()
+                    ..converged()
                 };
                 run_with(&d, m, settings)
             };
@@ -496,5 +484,18 @@ fn shared_frame_rotations_reach_the_same_optimum() {
                 assert!(e < 1e-4, "{preset:?} {m} camera {k}: {e} px apart");
             }
         }
+    }
+}
+
+/// Settings that solve to the optimum (tolerances far below any figure the
+/// tests compare), so two solve paths are compared at their optima and not
+/// where each happened to stop.
+fn converged() -> SolverSettings {
+    SolverSettings {
+        function_tolerance: 1e-14,
+        parameter_tolerance: 1e-12,
+        gradient_tolerance: 1e-14,
+        max_iterations: 500,
+        ..SolverSettings::default()
     }
 }
