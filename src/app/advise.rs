@@ -124,6 +124,35 @@ pub fn view_information(
     camera_from_board: &Pose,
     corners: &[usize],
 ) -> Option<DMatrix<f64>> {
+    information_where(k, free, target, camera_from_board, corners, |_, _| true).1
+}
+
+/// A candidate pose's corners inside the image and their information
+/// ([`view_information`] of the corners in front of the camera whose pixel lies
+/// inside the image, each corner projected once).
+fn candidate_information(kn: &Knowledge, pose: &Pose) -> (usize, Option<DMatrix<f64>>) {
+    let (w, h) = (kn.width as f64, kn.height as f64);
+    let all: Vec<usize> = (0..kn.target.num_corners()).collect();
+    information_where(
+        &kn.intrinsics,
+        &kn.free,
+        &kn.target,
+        pose,
+        &all,
+        |xc, uv| xc.z > 0.0 && uv.x >= 0.0 && uv.y >= 0.0 && uv.x <= w - 1.0 && uv.y <= h - 1.0,
+    )
+}
+
+/// The number of `corners` that project and that `keep` (camera-frame point,
+/// pixel) accepts, and their information as [`view_information`] has it.
+fn information_where(
+    k: &Intrinsics,
+    free: &[bool],
+    target: &Target,
+    camera_from_board: &Pose,
+    corners: &[usize],
+    keep: impl Fn(&Vector3<f64>, &Vector2<f64>) -> bool,
+) -> (usize, Option<DMatrix<f64>>) {
     let idx = free_indices(free);
     let mut sum = NormalSum::new(idx.len(), corners.len());
     // `Pose::transform`'s arithmetic, its rotation made once per view.
@@ -134,31 +163,9 @@ pub fn view_information(
     for &c in corners {
         let xc = r * target.nominal(c) + t;
         if let Some(d) = k.project_with_derivatives(&xc) {
-            sum.add(&idx, &xc, &d);
-        }
-    }
-    sum.eliminate_pose()
-}
-
-/// A candidate pose's corners inside the image and their information
-/// ([`view_information`] of the corners whose pixel lies inside the image, each
-/// corner projected once).
-fn candidate_information(kn: &Knowledge, pose: &Pose) -> (usize, Option<DMatrix<f64>>) {
-    let idx = free_indices(&kn.free);
-    let mut sum = NormalSum::new(idx.len(), kn.target.num_corners());
-    let (r, t) = (pose.rotation_matrix(), pose.translation_vector());
-    let (w, h) = (kn.width as f64, kn.height as f64);
-    for c in 0..kn.target.num_corners() {
-        let xc = r * kn.target.nominal(c) + t;
-        if xc.z <= 0.0 {
-            continue;
-        }
-        let Some(d) = kn.intrinsics.project_with_derivatives(&xc) else {
-            continue;
-        };
-        let uv = d.uv;
-        if uv.x >= 0.0 && uv.y >= 0.0 && uv.x <= w - 1.0 && uv.y <= h - 1.0 {
-            sum.add(&idx, &xc, &d);
+            if keep(&xc, &d.uv) {
+                sum.add(&idx, &xc, &d);
+            }
         }
     }
     (sum.used, sum.eliminate_pose())
