@@ -21,6 +21,9 @@ use crate::solver::problem::{Evaluation, Loss, Problem, SolverSettings, State};
 use nalgebra::DMatrix;
 use std::collections::HashMap;
 
+mod board_std;
+pub use board_std::unit_correction_std;
+
 /// A diagonal pivot of the Jacobi-scaled normal matrix below this marks a
 /// direction the data do not determine: its parameter is then a combination of
 /// the others to a relative 1e-5 (round-off leaves about 1e-16 in a true null
@@ -145,55 +148,114 @@ fn normal_matrix(
     weights: &[f64],
     eliminate: Eliminate,
 ) -> Result<Normal, UncertaintyError> {
+    let [n] = normal_matrices(e, layout, [weights], eliminate)?;
+    Ok(n)
+}
+
+/// One block-arrow normal matrix JᵀW_iJ per set of weights W_i, in one pass
+/// over the Jacobian's rows (the same columns, roles and blocks in each).
+fn normal_matrices<const K: usize>(
+    e: &Evaluation,
+    layout: &Layout,
+    weights: [&[f64]; K],
+    eliminate: Eliminate,
+) -> Result<[Normal; K], UncertaintyError> {
     let params: Vec<usize> = e.jacobian_col_param.iter().map(|&p| p as usize).collect();
     let (roles, kept, groups) = roles(layout, &params, eliminate);
     let eliminated: usize = groups.iter().map(|g| g.1).sum();
     if kept > MAX_REDUCED || kept.saturating_mul(eliminated) > MAX_COUPLING {
         return Err(UncertaintyError::TooLarge(kept));
     }
-    let mut n = Normal {
+    let mut out = std::array::from_fn(|_| Normal {
         kept_columns: (0..params.len())
             .filter(|&c| matches!(roles[c], Role::Kept(_)))
             .collect(),
-        roles,
-        params,
+        roles: roles.clone(),
+        params: params.clone(),
         a: DMatrix::zeros(kept, kept),
         d: groups.iter().map(|&(_, m)| vec![0.0; m * m]).collect(),
-        groups,
+        groups: groups.clone(),
         bt: DMatrix::zeros(eliminated, kept),
-    };
-    let (mut k_entries, mut e_entries) = (Vec::new(), Vec::new());
-    for r in 0..e.jacobian_rows {
-        k_entries.clear();
-        e_entries.clear();
-        let (lo, hi) = (
-            e.jacobian_row_ptr[r] as usize,
-            e.jacobian_row_ptr[r + 1] as usize,
+    });
+    let (mut kept_entries, mut eliminated_entries) = (Vec::new(), Vec::new());
+    for (o, pair) in e.jacobian_row_ptr.windows(3).step_by(2).enumerate() {
+        let (x, y) = (
+            pair[0] as usize..pair[1] as usize,
+            pair[1] as usize..pair[2] as usize,
         );
-        for i in lo..hi {
-            let v = e.jacobian_values[i];
-            match n.roles[e.jacobian_col_idx[i] as usize] {
-                Role::Kept(k) => k_entries.push((k, v)),
-                Role::Eliminated { group, index } => e_entries.push((group, index, v)),
+        let cols = |r: &std::ops::Range<usize>| &e.jacobian_col_idx[r.clone()];
+        let w = weights.map(|w| w[o]);
+        // An observation's two rows, usually over the same columns: one outer
+        // product of their value pairs.
+        if cols(&x) == cols(&y) {
+            entries(
+                e,
+                &roles,
+                x.clone(),
+                Some(y),
+                &mut kept_entries,
+                &mut eliminated_entries,
+            );
+            accumulate(&mut out, w, &kept_entries, &eliminated_entries)?;
+        } else {
+            for r in [x, y] {
+                entries(
+                    e,
+                    &roles,
+                    r,
+                    None,
+                    &mut kept_entries,
+                    &mut eliminated_entries,
+                );
+                accumulate(&mut out, w, &kept_entries, &eliminated_entries)?;
             }
         }
-        accumulate(&mut n, weights[r / 2], &k_entries, &e_entries)?;
     }
-    Ok(n)
+    Ok(out)
 }
 
-/// Adds one weighted Jacobian row's outer product to the block-arrow normal matrix.
-fn accumulate(
-    n: &mut Normal,
-    w: f64,
-    kept: &[(usize, f64)],
-    eliminated: &[(usize, usize, f64)],
+/// The kept and eliminated entries of Jacobian row `x`, each with its value and
+/// that of row `y` in the same column (0 without `y`).
+fn entries(
+    e: &Evaluation,
+    roles: &[Role],
+    x: std::ops::Range<usize>,
+    y: Option<std::ops::Range<usize>>,
+    kept: &mut Vec<(usize, [f64; 2])>,
+    eliminated: &mut Vec<(usize, usize, [f64; 2])>,
+) {
+    kept.clear();
+    eliminated.clear();
+    let start = y.as_ref().map(|y| y.start);
+    for (j, i) in x.clone().enumerate() {
+        let v = [
+            e.jacobian_values[i],
+            start.map_or(0.0, |s| e.jacobian_values[s + j]),
+        ];
+        match roles[e.jacobian_col_idx[i] as usize] {
+            Role::Kept(k) => kept.push((k, v)),
+            Role::Eliminated { group, index } => eliminated.push((group, index, v)),
+        }
+    }
+}
+
+/// Adds the weighted outer product of one observation's Jacobian rows (or of
+/// one row, the other 0) to each block-arrow normal matrix, with its weight.
+fn accumulate<const K: usize>(
+    normals: &mut [Normal; K],
+    w: [f64; K],
+    kept: &[(usize, [f64; 2])],
+    eliminated: &[(usize, usize, [f64; 2])],
 ) -> Result<(), UncertaintyError> {
-    let kk = n.a.nrows();
-    let a = n.a.as_mut_slice();
-    for &(j, vj) in kept {
-        for &(i, vi) in kept {
-            a[j * kk + i] += w * vi * vj;
+    let prod = |a: [f64; 2], b: [f64; 2]| a[0] * b[0] + a[1] * b[1];
+    for (n, w) in normals.iter_mut().zip(w) {
+        let kk = n.a.nrows();
+        let a = n.a.as_mut_slice();
+        for &(j, vj) in kept {
+            let column = &mut a[j * kk..(j + 1) * kk];
+            for &(i, vi) in kept {
+                column[i] += w * prod(vi, vj);
+            }
         }
     }
     let Some(&(g, _, _)) = eliminated.first() else {
@@ -204,18 +266,22 @@ fn accumulate(
             "a residual depends on two eliminated blocks".into(),
         ));
     }
-    let (start, m) = n.groups[g];
-    let d = &mut n.d[g];
-    for &(_, a, va) in eliminated {
-        for &(_, b, vb) in eliminated {
-            d[(a - start) * m + b - start] += w * va * vb;
-        }
-    }
-    let ne = n.bt.nrows();
-    let bt = n.bt.as_mut_slice();
-    for &(k, vk) in kept {
+    for (n, w) in normals.iter_mut().zip(w) {
+        let (start, m) = n.groups[g];
+        let d = &mut n.d[g];
         for &(_, a, va) in eliminated {
-            bt[k * ne + a] += w * vk * va;
+            let row = &mut d[(a - start) * m..(a - start + 1) * m];
+            for &(_, b, vb) in eliminated {
+                row[b - start] += w * prod(va, vb);
+            }
+        }
+        let ne = n.bt.nrows();
+        let bt = n.bt.as_mut_slice();
+        for &(k, vk) in kept {
+            let column = &mut bt[k * ne..(k + 1) * ne];
+            for &(_, a, va) in eliminated {
+                column[a] += w * prod(vk, va);
+            }
         }
     }
     Ok(())
@@ -253,8 +319,24 @@ fn cholesky(a: &mut [f64], m: usize) -> Result<(), usize> {
     Ok(())
 }
 
+/// Σ aᵢbᵢ over the shorter length, in four interleaved partial sums: a single
+/// running sum waits on each addition, and the Cholesky factors and triangular
+/// solves here are mostly these dot products.
 fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
+    let n = a.len().min(b.len());
+    let (a, b) = (&a[..n], &b[..n]);
+    let mut s = [0.0; 4];
+    let (head, tail) = (n - n % 4, n % 4);
+    for (x, y) in a[..head].chunks_exact(4).zip(b[..head].chunks_exact(4)) {
+        for k in 0..4 {
+            s[k] += x[k] * y[k];
+        }
+    }
+    let mut rest = 0.0;
+    for k in 0..tail {
+        rest += a[head + k] * b[head + k];
+    }
+    (s[0] + s[1]) + (s[2] + s[3]) + rest
 }
 
 /// Solves L y = b in place (L lower, row-major m × m).
@@ -310,8 +392,25 @@ fn jacobi_scale(
     layout: &Layout,
     n: &mut Normal,
 ) -> Result<Vec<f64>, UncertaintyError> {
-    let kk = n.a.nrows();
-    let mut kept = vec![0.0; kk];
+    let (kept, eliminated) = jacobi_scales(d, layout, n)?;
+    scale_normal(n, &kept, &eliminated);
+    Ok(n.roles
+        .iter()
+        .map(|r| match *r {
+            Role::Kept(k) => kept[k],
+            Role::Eliminated { index, .. } => eliminated[index],
+        })
+        .collect())
+}
+
+/// The scales 1/√diag of the kept and of the eliminated values that give the
+/// normal matrix a unit diagonal.
+fn jacobi_scales(
+    d: &Dataset,
+    layout: &Layout,
+    n: &Normal,
+) -> Result<(Vec<f64>, Vec<f64>), UncertaintyError> {
+    let mut kept = vec![0.0; n.a.nrows()];
     let mut eliminated = vec![0.0; n.bt.nrows()];
     for (col, role) in n.roles.iter().enumerate() {
         let (diag, slot) = match *role {
@@ -331,6 +430,11 @@ fn jacobi_scale(
         }
         *slot = 1.0 / diag.sqrt();
     }
+    Ok((kept, eliminated))
+}
+
+/// D N D for the diagonal D of the kept and eliminated scales.
+fn scale_normal(n: &mut Normal, kept: &[f64], eliminated: &[f64]) {
     for (j, mut column) in n.a.column_iter_mut().enumerate() {
         for (i, v) in column.iter_mut().enumerate() {
             *v *= kept[i] * kept[j];
@@ -348,13 +452,6 @@ fn jacobi_scale(
             *v *= kept[k] * eliminated[e];
         }
     }
-    Ok(n.roles
-        .iter()
-        .map(|r| match *r {
-            Role::Kept(k) => kept[k],
-            Role::Eliminated { index, .. } => eliminated[index],
-        })
-        .collect())
 }
 
 /// Eliminates every block and factors what is left: [`schur`], then the
@@ -481,6 +578,15 @@ fn weighted_normal_of(
     settings: &SolverSettings,
     eliminate: Eliminate,
 ) -> Result<(Vec<f64>, Normal), UncertaintyError> {
+    check_shape(e, problem)?;
+    let weights = loss_weights(problem.dataset, settings, &e.residuals);
+    let mut n = normal_matrix(e, &problem.layout(), &weights, eliminate)?;
+    add_lens_prior(&mut n, &problem.lens_prior_weights(settings));
+    Ok((weights, n))
+}
+
+/// `Err` unless the Jacobian has one row per residual of `problem` and a label per column.
+fn check_shape(e: &Evaluation, problem: &Problem) -> Result<(), UncertaintyError> {
     let rows = 2 * problem.dataset.observations.len();
     if e.jacobian_rows != rows
         || e.jacobian_row_ptr.len() != rows + 1
@@ -493,10 +599,7 @@ fn weighted_normal_of(
             e.jacobian_col_param.len()
         )));
     }
-    let weights = loss_weights(problem.dataset, settings, &e.residuals);
-    let mut n = normal_matrix(e, &problem.layout(), &weights, eliminate)?;
-    add_lens_prior(&mut n, &problem.lens_prior_weights(settings));
-    Ok((weights, n))
+    Ok(())
 }
 
 /// Σ_θ of every camera at unit noise, from the Jacobian of `problem` at `state`
@@ -591,56 +694,6 @@ fn per_camera(
             cov
         })
         .collect()
-}
-
-/// The standard deviation of every static correction value at unit noise (3 per
-/// corner; 0 for a held value), from the same normal matrix as
-/// [`unit_covariance`]; `Err` when the problem has no free correction or when the
-/// corrections are the eliminated blocks (fewer values in the images' blocks than
-/// in the corners', so a dataset too small to measure a board anyway).
-pub fn unit_correction_std(
-    problem: &Problem,
-    state: &State,
-    settings: &SolverSettings,
-) -> Result<Vec<[f64; 3]>, UncertaintyError> {
-    let d = problem.dataset;
-    let layout = problem.layout();
-    let (e, weights, mut n) = weighted_normal(problem, state, settings, Eliminate::Smaller)?;
-    let targets: Vec<usize> = (0..n.params.len())
-        .filter(|&col| n.params[col] >= layout.corrections)
-        .collect();
-    if !corrections_kept(&n, &layout) {
-        return Err(UncertaintyError::Jacobian(
-            "the corrections are not determined well enough for a covariance".into(),
-        ));
-    }
-    let scale = jacobi_scale(d, &layout, &mut n)?;
-    eliminate(d, &layout, &mut n)?;
-    let x = solve_columns(&n, &scale, &targets);
-    // Only the diagonal of the sandwich (WJX)ᵀ(WJX): one value per target.
-    let t = targets.len();
-    let mut var = vec![0.0; t];
-    let mut y = vec![0.0; t];
-    for r in 0..e.jacobian_rows {
-        y.iter_mut().for_each(|v| *v = 0.0);
-        for i in e.jacobian_row_ptr[r] as usize..e.jacobian_row_ptr[r + 1] as usize {
-            let (col, v) = (e.jacobian_col_idx[i] as usize, e.jacobian_values[i]);
-            // Over slices, so that it vectorises; each y[u] sums in the same order.
-            for (yu, xu) in y.iter_mut().zip(&x[col * t..(col + 1) * t]) {
-                *yu += v * xu;
-            }
-        }
-        let w2 = weights[r / 2] * weights[r / 2];
-        for (vu, yu) in var.iter_mut().zip(&y) {
-            *vu += w2 * yu * yu;
-        }
-    }
-    let mut out = vec![[0.0; 3]; d.target.num_corners()];
-    for (u, &col) in targets.iter().enumerate() {
-        let i = n.params[col] - layout.corrections;
-        out[i / CORRECTION_STRIDE][i % CORRECTION_STRIDE] = var[u].sqrt();
-    }
-    Ok(out)
 }
 
 /// The static corrections' marginal information at unit noise, with each
