@@ -479,7 +479,10 @@ fn schur(d: &Dataset, layout: &Layout, n: &mut Normal) -> Result<(), Uncertainty
                 .unwrap_or(0);
             UncertaintyError::RankDeficient(describe(d, layout, n.params[col]))
         })?;
-        for column in n.bt.as_mut_slice().chunks_exact_mut(ne) {
+    }
+    // Column by column of Bᵀ, each read once from memory.
+    for column in n.bt.as_mut_slice().chunks_exact_mut(ne.max(1)) {
+        for (g, &(start, m)) in n.groups.iter().enumerate() {
             forward(&n.d[g], m, &mut column[start..start + m]);
         }
     }
@@ -640,27 +643,23 @@ fn corrections_kept(n: &Normal, layout: &Layout) -> bool {
     any
 }
 
-/// (WJX)ᵀ(WJX), t × t, with X given per Jacobian column (t values each).
+/// (WJX)ᵀ(WJX), t × t, with X given per Jacobian column (t values each): the
+/// rows of WJX made first (one column of t values per Jacobian row), then one
+/// matrix product.
 fn sandwich(e: &Evaluation, weights: &[f64], x: &[f64], t: usize) -> DMatrix<f64> {
-    let mut out = DMatrix::zeros(t, t);
-    let mut y = vec![0.0; t];
-    for r in 0..e.jacobian_rows {
-        y.iter_mut().for_each(|v| *v = 0.0);
+    let mut y = DMatrix::<f64>::zeros(t, e.jacobian_rows);
+    for (r, column) in y.as_mut_slice().chunks_exact_mut(t.max(1)).enumerate() {
         for i in e.jacobian_row_ptr[r] as usize..e.jacobian_row_ptr[r + 1] as usize {
             let (col, v) = (e.jacobian_col_idx[i] as usize, e.jacobian_values[i]);
-            // Over slices, so that it vectorises; each y[u] sums in the same order.
-            for (yu, xu) in y.iter_mut().zip(&x[col * t..(col + 1) * t]) {
+            // Over slices, so that it vectorises.
+            for (yu, xu) in column.iter_mut().zip(&x[col * t..(col + 1) * t]) {
                 *yu += v * xu;
             }
         }
         let w = weights[r / 2];
-        for a in 0..t {
-            for b in 0..t {
-                out[(a, b)] += w * w * y[a] * y[b];
-            }
-        }
+        column.iter_mut().for_each(|v| *v *= w);
     }
-    out
+    &y * y.transpose()
 }
 
 /// Splits Σ over all free intrinsics into each camera's n × n block.
