@@ -211,7 +211,26 @@ fn normal_matrices<const K: usize>(
             }
         }
     }
+    out.iter_mut().for_each(mirror);
     Ok(out)
+}
+
+/// Fills each symmetric block's entries below the diagonal (of a column-major
+/// kept block; of a row-major eliminated block, alike) from those above, which
+/// [`accumulate`] sums.
+fn mirror(n: &mut Normal) {
+    let fill = |a: &mut [f64], m: usize| {
+        for hi in 0..m {
+            for lo in 0..hi {
+                a[lo * m + hi] = a[hi * m + lo];
+            }
+        }
+    };
+    let kk = n.a.nrows();
+    fill(n.a.as_mut_slice(), kk);
+    for (d, &(_, m)) in n.d.iter_mut().zip(&n.groups) {
+        fill(d, m);
+    }
 }
 
 /// The kept and eliminated entries of Jacobian row `x`, each with its value and
@@ -248,13 +267,14 @@ fn accumulate<const K: usize>(
     eliminated: &[(usize, usize, [f64; 2])],
 ) -> Result<(), UncertaintyError> {
     let prod = |a: [f64; 2], b: [f64; 2]| a[0] * b[0] + a[1] * b[1];
+    // Symmetric blocks: only the entries (lo, hi) of column hi ≥ lo are summed
+    // here, the rest mirrored once at the end ([`mirror`]).
     for (n, w) in normals.iter_mut().zip(w) {
         let kk = n.a.nrows();
         let a = n.a.as_mut_slice();
-        for &(j, vj) in kept {
-            let column = &mut a[j * kk..(j + 1) * kk];
-            for &(i, vi) in kept {
-                column[i] += w * prod(vi, vj);
+        for (u, &(j, vj)) in kept.iter().enumerate() {
+            for &(i, vi) in &kept[u..] {
+                a[i.max(j) * kk + i.min(j)] += w * prod(vi, vj);
             }
         }
     }
@@ -269,10 +289,9 @@ fn accumulate<const K: usize>(
     for (n, w) in normals.iter_mut().zip(w) {
         let (start, m) = n.groups[g];
         let d = &mut n.d[g];
-        for &(_, a, va) in eliminated {
-            let row = &mut d[(a - start) * m..(a - start + 1) * m];
-            for &(_, b, vb) in eliminated {
-                row[b - start] += w * prod(va, vb);
+        for (u, &(_, a, va)) in eliminated.iter().enumerate() {
+            for &(_, b, vb) in &eliminated[u..] {
+                d[(a.max(b) - start) * m + a.min(b) - start] += w * prod(va, vb);
             }
         }
         let ne = n.bt.nrows();
