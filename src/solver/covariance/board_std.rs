@@ -6,8 +6,8 @@
 //! few values, are eliminated frame by frame from H and from the noise term
 //! alike, one Cholesky factor of what is left gives its inverse, and only the
 //! diagonal of the product is read. The normal matrices and their
-//! factorisations are the parent module's.
-use super::{
+//! factorisations are `normal`'s.
+use super::normal::{
     add_lens_prior, backward, check_shape, cholesky, corrections_kept, describe, dot,
     jacobi_scales, jacobian, loss_weights, normal_matrices, scale_normal, schur, Eliminate, Normal,
 };
@@ -18,7 +18,7 @@ use nalgebra::DMatrix;
 
 /// The standard deviation of every static correction value at unit noise (3 per
 /// corner; 0 for a held value), with the loss of `settings` as
-/// [`super::unit_covariance`] takes it; `Err` when the problem has no free
+/// `unit_covariance` takes it; `Err` when the problem has no free
 /// correction or when the corrections are the eliminated blocks (fewer values
 /// in the images' blocks than in the corners', so a dataset too small to
 /// measure a board anyway).
