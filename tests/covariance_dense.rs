@@ -220,8 +220,9 @@ fn board_sigma_and_covariance_match_the_dense_inverse() {
         let c = calibrated(&d, method, settings);
         let r = dense(&c);
         // opencv8's k4–k6 nearly trade off against k1–k3: its intrinsics' Σ
-        // differs between two exact computations in another order by up to 1e-6
-        // of √(Σ_aa Σ_bb) (fx against k1), so only its board is compared.
+        // differs between two exact computations in another order by more
+        // than 1e-8 of √(Σ_aa Σ_bb) (fx against k1), so only its board is
+        // compared.
         let intrinsics = if model == LensModel::OpenCv8 {
             f64::NAN
         } else {
