@@ -12,6 +12,7 @@ mod capi;
 mod charuco;
 mod cli;
 mod compare;
+mod covariance_dense;
 mod cpp_example;
 mod degenerate;
 mod detect;

@@ -5,6 +5,7 @@
 
 #include <ceres/ceres.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <unordered_map>
@@ -187,36 +188,53 @@ FreeColumns FreeColumnsOf(const Assembled& a, const double* base) {
 // CRS with one row per residual in observation order, straight from the cost
 // functions.  Problem::Evaluate gives the same numbers, but builds a program and
 // a sparse matrix first, which costs several times the evaluation itself.
+// Two passes: the rows' lengths first (a block's rows all span its free blocks'
+// columns), then each row's entries written in place, with no intermediate
+// copy (a 650-image Jacobian holds 3.5 million entries).
 void DirectJacobian(const Assembled& a, const double* base, size_t num_observations,
                     ffi::Jacobian& out) {
   const ceres::Problem& problem = *a.problem;
   *a.loss_scale_factor = 0.0;  // the Jacobian of the plain residuals
   const FreeColumns f = FreeColumnsOf(a, base);
-  // Rows come block by block; observation i's two rows go to rows 2i, 2i+1.
-  std::vector<uint32_t> cols;
-  std::vector<double> vals;
-  std::vector<std::pair<uint32_t, uint32_t>> spans(2 * num_observations);  // into cols/vals
-  out.residuals.assign(2 * num_observations, 0.0);
   std::vector<double*> blocks;
+  // Per residual block, its free parameter blocks' entries (nullptr if held).
+  std::vector<std::vector<const std::pair<uint32_t, std::vector<int>>*>> free(a.residuals.size());
+  std::vector<uint32_t> length(2 * num_observations, 0);
+  for (size_t k = 0; k < a.residuals.size(); ++k) {
+    problem.GetParameterBlocksForResidualBlock(a.residuals[k], &blocks);
+    uint32_t width = 0;
+    free[k].assign(blocks.size(), nullptr);
+    for (size_t b = 0; b < blocks.size(); ++b) {
+      const auto it = f.blocks.find(blocks[b]);
+      if (it == f.blocks.end()) continue;
+      free[k][b] = &it->second;
+      width += static_cast<uint32_t>(it->second.second.size());
+    }
+    const int nres = a.PlainCost(k).num_residuals();
+    const uint32_t* obs = a.ObservationsOf(k, nres);
+    for (int row = 0; row < nres; ++row) length[2 * obs[row / 2] + row % 2] = width;
+  }
+  out.row_ptr.assign(1, 0);
+  out.row_ptr.reserve(length.size() + 1);
+  for (uint32_t n : length) out.row_ptr.push_back(out.row_ptr.back() + n);
+  out.col_idx.resize(out.row_ptr.back());
+  out.values.resize(out.row_ptr.back());
+  out.residuals.assign(2 * num_observations, 0.0);
   std::vector<std::vector<double>> jac;
   std::vector<double*> jac_ptr;
-  std::vector<const std::pair<uint32_t, std::vector<int>>*> free;
   std::vector<double> r;
   for (size_t k = 0; k < a.residuals.size(); ++k) {
     const ceres::CostFunction* cost = &a.PlainCost(k);
     problem.GetParameterBlocksForResidualBlock(a.residuals[k], &blocks);
     const std::vector<int32_t>& sizes = cost->parameter_block_sizes();
     const int nres = cost->num_residuals();
-    jac.resize(blocks.size());
+    jac.resize(std::max(jac.size(), blocks.size()));
     jac_ptr.assign(blocks.size(), nullptr);
-    free.assign(blocks.size(), nullptr);
     for (size_t b = 0; b < blocks.size(); ++b) {
+      if (free[k][b] == nullptr) continue;
+      // Zeroed: a cost function may leave the entries it knows are 0.
       jac[b].assign(static_cast<size_t>(nres) * sizes[b], 0.0);
-      const auto it = f.blocks.find(blocks[b]);
-      if (it != f.blocks.end()) {
-        jac_ptr[b] = jac[b].data();
-        free[b] = &it->second;
-      }
+      jac_ptr[b] = jac[b].data();
     }
     r.assign(nres, 0.0);
     if (!cost->Evaluate(blocks.data(), r.data(), jac_ptr.data())) {
@@ -226,29 +244,19 @@ void DirectJacobian(const Assembled& a, const double* base, size_t num_observati
     for (int row = 0; row < nres; ++row) {
       const size_t target = 2 * obs[row / 2] + row % 2;
       out.residuals[target] = r[row];
-      spans[target].first = static_cast<uint32_t>(cols.size());
+      size_t at = out.row_ptr[target];
       for (size_t b = 0; b < blocks.size(); ++b) {
-        if (free[b] == nullptr) continue;
-        const auto& [first, coords] = *free[b];
+        if (free[k][b] == nullptr) continue;
+        const auto& [first, coords] = *free[k][b];
         const double* jrow = jac[b].data() + static_cast<size_t>(row) * sizes[b];
-        for (size_t j = 0; j < coords.size(); ++j) {
-          cols.push_back(first + static_cast<uint32_t>(j));
-          vals.push_back(jrow[coords[j]]);
+        for (size_t j = 0; j < coords.size(); ++j, ++at) {
+          out.col_idx[at] = first + static_cast<uint32_t>(j);
+          out.values[at] = jrow[coords[j]];
         }
       }
-      spans[target].second = static_cast<uint32_t>(cols.size());
     }
   }
   out.cols = f.params.size();
-  out.col_idx.reserve(cols.size());
-  out.values.reserve(vals.size());
-  out.row_ptr.reserve(spans.size() + 1);
-  out.row_ptr.push_back(0);
-  for (const auto& [lo, hi] : spans) {
-    out.col_idx.insert(out.col_idx.end(), cols.begin() + lo, cols.begin() + hi);
-    out.values.insert(out.values.end(), vals.begin() + lo, vals.begin() + hi);
-    out.row_ptr.push_back(static_cast<uint32_t>(out.col_idx.size()));
-  }
   out.col_param = f.params;
 }
 

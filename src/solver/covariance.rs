@@ -14,381 +14,19 @@
 //! fit solves the weighted normal equations H = JᵀWJ, so an estimate moves by
 //! H⁻¹JᵀW·noise and Σ_θ = σ̂² [H⁻¹ (JᵀW²J) H⁻¹]_θθ; without a loss (W = I) this is
 //! σ̂² [(JᵀJ)⁻¹]_θθ, and a uniform weight cancels.
-use crate::model::dataset::Dataset;
-use crate::model::state::{Layout, CORRECTION_STRIDE, POSE_PARAMS};
-use crate::model::uncertainty::{IntrinsicsCovariance, UncertaintyError, MAX_REDUCED};
-use crate::solver::problem::{Evaluation, Loss, Problem, SolverSettings, State};
+use crate::model::state::Layout;
+use crate::model::uncertainty::{IntrinsicsCovariance, UncertaintyError};
+use crate::solver::problem::{Evaluation, Problem, SolverSettings, State};
 use nalgebra::DMatrix;
-use std::collections::HashMap;
+use normal::{
+    add_lens_prior, backward, check_shape, cholesky, corrections_kept, describe, dot, eliminate,
+    forward, jacobi_scale, loss_weights, normal_matrix, schur, Eliminate, Normal, Role,
+};
 
-/// A diagonal pivot of the Jacobi-scaled normal matrix below this marks a
-/// direction the data do not determine: its parameter is then a combination of
-/// the others to a relative 1e-5 (round-off leaves about 1e-16 in a true null
-/// direction; a weak but real one, such as k3 against k1 and k2, stays far above).
-const MIN_PIVOT: f64 = 1e-10;
-
-/// Most values the coupling block Bᵀ (eliminated × kept) may hold: 400 MB of f64.
-const MAX_COUPLING: usize = 50_000_000;
-
-/// Where a Jacobian column goes: the dense reduced system, or a block eliminated
-/// first (`index` counts the eliminated values, block by block).
-#[derive(Debug, Clone, Copy)]
-enum Role {
-    Kept(usize),
-    Eliminated { group: usize, index: usize },
-}
-
-/// The normal matrix JᵀWJ in block-arrow form, and what its columns are.
-struct Normal {
-    roles: Vec<Role>,
-    /// Per column: the value it differentiates (its index in the parameter buffer).
-    params: Vec<usize>,
-    /// Per kept index: its column.
-    kept_columns: Vec<usize>,
-    /// The kept block A (kept × kept).
-    a: DMatrix<f64>,
-    /// Per eliminated block: its first eliminated index and its size.
-    groups: Vec<(usize, usize)>,
-    /// Per eliminated block: its diagonal block D, size × size row-major.
-    d: Vec<Vec<f64>>,
-    /// Bᵀ (eliminated × kept), so that a kept value's couplings are contiguous.
-    bt: DMatrix<f64>,
-}
-
-/// The group of a buffer index when per-image blocks (`frames`) or per-corner
-/// corrections are eliminated; `None` for a kept value.
-fn group_of(layout: &Layout, index: usize, frames: bool) -> Option<usize> {
-    if frames && (layout.frames..layout.corrections).contains(&index) {
-        Some((index - layout.frames) / layout.frame_stride)
-    } else if !frames && index >= layout.corrections {
-        Some((index - layout.corrections) / CORRECTION_STRIDE)
-    } else {
-        None
-    }
-}
-
-/// Which blocks a normal matrix eliminates before its dense solve.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Eliminate {
-    /// The per-image blocks or the per-corner corrections, whichever leaves the
-    /// smaller reduced system (the intrinsics are all that is asked for).
-    Smaller,
-    /// The per-image blocks (pose, bend), so that the corrections stay in the
-    /// reduced system with the intrinsics they trade off against.
-    Frames,
-}
-
-/// The roles of the columns and the eliminated blocks (first index, size).
-fn roles(
-    layout: &Layout,
-    params: &[usize],
-    eliminate: Eliminate,
-) -> (Vec<Role>, usize, Vec<(usize, usize)>) {
-    let count = |frames| {
-        params
-            .iter()
-            .filter(|&&p| group_of(layout, p, frames).is_some())
-            .count()
-    };
-    let frames = eliminate == Eliminate::Frames || {
-        let (in_frames, in_corners) = (count(true), count(false));
-        in_corners == 0 || in_frames >= in_corners
-    };
-    let mut ids: HashMap<usize, usize> = HashMap::new();
-    let mut sizes: Vec<usize> = Vec::new();
-    let mut local = Vec::with_capacity(params.len());
-    let mut kept = 0;
-    for &p in params {
-        local.push(match group_of(layout, p, frames) {
-            None => {
-                kept += 1;
-                None
-            }
-            Some(g) => {
-                let next = sizes.len();
-                let group = *ids.entry(g).or_insert(next);
-                if group == next {
-                    sizes.push(0);
-                }
-                sizes[group] += 1;
-                Some((group, sizes[group] - 1))
-            }
-        });
-    }
-    let mut groups = Vec::with_capacity(sizes.len());
-    let mut start = 0;
-    for &m in &sizes {
-        groups.push((start, m));
-        start += m;
-    }
-    let mut k = 0;
-    let roles = local
-        .into_iter()
-        .map(|l| match l {
-            None => {
-                k += 1;
-                Role::Kept(k - 1)
-            }
-            Some((group, i)) => Role::Eliminated {
-                group,
-                index: groups[group].0 + i,
-            },
-        })
-        .collect();
-    (roles, kept, groups)
-}
-
-/// JᵀWJ from a CRS Jacobian with one weight per pair of rows (per observation).
-fn normal_matrix(
-    e: &Evaluation,
-    layout: &Layout,
-    weights: &[f64],
-    eliminate: Eliminate,
-) -> Result<Normal, UncertaintyError> {
-    let params: Vec<usize> = e.jacobian_col_param.iter().map(|&p| p as usize).collect();
-    let (roles, kept, groups) = roles(layout, &params, eliminate);
-    let eliminated: usize = groups.iter().map(|g| g.1).sum();
-    if kept > MAX_REDUCED || kept.saturating_mul(eliminated) > MAX_COUPLING {
-        return Err(UncertaintyError::TooLarge(kept));
-    }
-    let mut n = Normal {
-        kept_columns: (0..params.len())
-            .filter(|&c| matches!(roles[c], Role::Kept(_)))
-            .collect(),
-        roles,
-        params,
-        a: DMatrix::zeros(kept, kept),
-        d: groups.iter().map(|&(_, m)| vec![0.0; m * m]).collect(),
-        groups,
-        bt: DMatrix::zeros(eliminated, kept),
-    };
-    let (mut k_entries, mut e_entries) = (Vec::new(), Vec::new());
-    for r in 0..e.jacobian_rows {
-        k_entries.clear();
-        e_entries.clear();
-        let (lo, hi) = (
-            e.jacobian_row_ptr[r] as usize,
-            e.jacobian_row_ptr[r + 1] as usize,
-        );
-        for i in lo..hi {
-            let v = e.jacobian_values[i];
-            match n.roles[e.jacobian_col_idx[i] as usize] {
-                Role::Kept(k) => k_entries.push((k, v)),
-                Role::Eliminated { group, index } => e_entries.push((group, index, v)),
-            }
-        }
-        accumulate(&mut n, weights[r / 2], &k_entries, &e_entries)?;
-    }
-    Ok(n)
-}
-
-/// Adds one weighted Jacobian row's outer product to the block-arrow normal matrix.
-fn accumulate(
-    n: &mut Normal,
-    w: f64,
-    kept: &[(usize, f64)],
-    eliminated: &[(usize, usize, f64)],
-) -> Result<(), UncertaintyError> {
-    let kk = n.a.nrows();
-    let a = n.a.as_mut_slice();
-    for &(j, vj) in kept {
-        for &(i, vi) in kept {
-            a[j * kk + i] += w * vi * vj;
-        }
-    }
-    let Some(&(g, _, _)) = eliminated.first() else {
-        return Ok(());
-    };
-    if eliminated.iter().any(|&(h, _, _)| h != g) {
-        return Err(UncertaintyError::Jacobian(
-            "a residual depends on two eliminated blocks".into(),
-        ));
-    }
-    let (start, m) = n.groups[g];
-    let d = &mut n.d[g];
-    for &(_, a, va) in eliminated {
-        for &(_, b, vb) in eliminated {
-            d[(a - start) * m + b - start] += w * va * vb;
-        }
-    }
-    let ne = n.bt.nrows();
-    let bt = n.bt.as_mut_slice();
-    for &(k, vk) in kept {
-        for &(_, a, va) in eliminated {
-            bt[k * ne + a] += w * vk * va;
-        }
-    }
-    Ok(())
-}
-
-/// The lens prior's information (its weight², a diagonal on the intrinsics it
-/// holds): part of H, the curvature the fit solves with, never of the noise term
-/// JᵀW²J, so Σ_θ is the variance of the estimate that the prior regularises.
-fn add_lens_prior(n: &mut Normal, weights: &[f64]) {
-    for col in 0..n.params.len() {
-        if let (Some(&w), Role::Kept(k)) = (weights.get(n.params[col]), n.roles[col]) {
-            n.a[(k, k)] += w * w;
-        }
-    }
-}
-
-/// In-place lower Cholesky factor of a symmetric m × m row-major matrix; `Err(i)`
-/// at the first pivot below [`MIN_PIVOT`] (the matrix is Jacobi-scaled, unit diagonal).
-fn cholesky(a: &mut [f64], m: usize) -> Result<(), usize> {
-    for j in 0..m {
-        let (done, rest) = a.split_at_mut(j * m + m);
-        let row_j = &mut done[j * m..];
-        let d = row_j[j] - dot(&row_j[..j], &row_j[..j]);
-        // NaN fails too.
-        if d.is_nan() || d <= MIN_PIVOT {
-            return Err(j);
-        }
-        let d = d.sqrt();
-        row_j[j] = d;
-        row_j[j + 1..].iter_mut().for_each(|v| *v = 0.0);
-        for row_i in rest.chunks_exact_mut(m) {
-            row_i[j] = (row_i[j] - dot(&row_i[..j], &row_j[..j])) / d;
-        }
-    }
-    Ok(())
-}
-
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
-}
-
-/// Solves L y = b in place (L lower, row-major m × m).
-fn forward(l: &[f64], m: usize, b: &mut [f64]) {
-    for i in 0..m {
-        let s = b[i] - dot(&l[i * m..i * m + i], &b[..i]);
-        b[i] = s / l[i * m + i];
-    }
-}
-
-/// Solves Lᵀ x = y in place.
-fn backward(l: &[f64], m: usize, y: &mut [f64]) {
-    for i in (0..m).rev() {
-        let mut s = y[i];
-        for k in i + 1..m {
-            s -= l[k * m + i] * y[k];
-        }
-        y[i] = s / l[i * m + i];
-    }
-}
-
-/// What a buffer index is, in words, for a message.
-fn describe(d: &Dataset, layout: &Layout, index: usize) -> String {
-    if index < layout.intrinsics_len() {
-        let k = layout
-            .intrinsics_offsets
-            .iter()
-            .rposition(|&o| o <= index)
-            .unwrap_or(0);
-        let name = layout.lens_models[k].param_names()[index - layout.intrinsics_offsets[k]];
-        format!("{name} of camera {}", d.cameras[k].name)
-    } else if index < layout.frames {
-        let k = (index - layout.camera_poses) / POSE_PARAMS;
-        format!("the pose of camera {}", d.cameras[k].name)
-    } else if index < layout.corrections {
-        let j = (index - layout.frames) / layout.frame_stride;
-        let what = if (index - layout.frames) % layout.frame_stride < POSE_PARAMS {
-            "board pose"
-        } else {
-            "bend"
-        };
-        format!("the {what} of frame {}", d.frame_ids[j])
-    } else {
-        let i = (index - layout.corrections) / CORRECTION_STRIDE;
-        format!("the correction of corner {i}")
-    }
-}
-
-/// Scales the normal matrix to a unit diagonal (its pivots then compare with
-/// [`MIN_PIVOT`] whatever the parameters' units); returns the column scales.
-fn jacobi_scale(
-    d: &Dataset,
-    layout: &Layout,
-    n: &mut Normal,
-) -> Result<Vec<f64>, UncertaintyError> {
-    let kk = n.a.nrows();
-    let mut kept = vec![0.0; kk];
-    let mut eliminated = vec![0.0; n.bt.nrows()];
-    for (col, role) in n.roles.iter().enumerate() {
-        let (diag, slot) = match *role {
-            Role::Kept(k) => (n.a[(k, k)], &mut kept[k]),
-            Role::Eliminated { group, index } => {
-                let (start, m) = n.groups[group];
-                let i = index - start;
-                (n.d[group][i * m + i], &mut eliminated[index])
-            }
-        };
-        if !(diag > 0.0 && diag.is_finite()) {
-            return Err(UncertaintyError::RankDeficient(describe(
-                d,
-                layout,
-                n.params[col],
-            )));
-        }
-        *slot = 1.0 / diag.sqrt();
-    }
-    for (j, mut column) in n.a.column_iter_mut().enumerate() {
-        for (i, v) in column.iter_mut().enumerate() {
-            *v *= kept[i] * kept[j];
-        }
-    }
-    for (&(start, m), d) in n.groups.iter().zip(&mut n.d) {
-        for a in 0..m {
-            for b in 0..m {
-                d[a * m + b] *= eliminated[start + a] * eliminated[start + b];
-            }
-        }
-    }
-    for (k, mut column) in n.bt.column_iter_mut().enumerate() {
-        for (e, v) in column.iter_mut().enumerate() {
-            *v *= kept[k] * eliminated[e];
-        }
-    }
-    Ok(n.roles
-        .iter()
-        .map(|r| match *r {
-            Role::Kept(k) => kept[k],
-            Role::Eliminated { index, .. } => eliminated[index],
-        })
-        .collect())
-}
-
-/// Eliminates every block and factors what is left: [`schur`], then the
-/// Schur complement's Cholesky factor in place.
-fn eliminate(d: &Dataset, layout: &Layout, n: &mut Normal) -> Result<(), UncertaintyError> {
-    schur(d, layout, n)?;
-    let kk = n.a.nrows();
-    // Symmetric, so the column-major storage reads as row-major.
-    cholesky(n.a.as_mut_slice(), kk).map_err(|k| {
-        UncertaintyError::RankDeficient(describe(d, layout, n.params[n.kept_columns[k]]))
-    })
-}
-
-/// Factors every eliminated block D = LLᵀ in place, turns Bᵀ into L⁻¹Bᵀ and
-/// subtracts its Gram matrix from the kept block, leaving the Schur complement
-/// A − B D⁻¹ Bᵀ there (one matrix product).
-fn schur(d: &Dataset, layout: &Layout, n: &mut Normal) -> Result<(), UncertaintyError> {
-    let ne = n.bt.nrows();
-    for (g, &(start, m)) in n.groups.iter().enumerate() {
-        cholesky(&mut n.d[g], m).map_err(|l| {
-            let col = n
-                .roles
-                .iter()
-                .position(|r| matches!(*r, Role::Eliminated { index, .. } if index == start + l))
-                .unwrap_or(0);
-            UncertaintyError::RankDeficient(describe(d, layout, n.params[col]))
-        })?;
-        for column in n.bt.as_mut_slice().chunks_exact_mut(ne) {
-            forward(&n.d[g], m, &mut column[start..start + m]);
-        }
-    }
-    n.a.gemm(-1.0, &n.bt.transpose(), &n.bt, 1.0);
-    Ok(())
-}
+mod board_std;
+mod normal;
+pub use board_std::unit_correction_std;
+pub use normal::jacobian;
 
 /// X = H⁻¹ E for the unit vectors E of the `targets` columns (all kept): one
 /// row of `targets.len()` values per column of the Jacobian, in its units.
@@ -434,22 +72,6 @@ fn solve_columns(n: &Normal, scale: &[f64], targets: &[usize]) -> Vec<f64> {
     x
 }
 
-/// The robust loss' weight ρ'(‖r‖²) of each observation (1 without a loss).
-fn loss_weights(d: &Dataset, settings: &SolverSettings, residuals: &[f64]) -> Vec<f64> {
-    let a2 = settings.loss_scale_px * settings.loss_scale_px;
-    d.observations
-        .iter()
-        .zip(residuals.chunks_exact(2))
-        .map(|(o, r)| match settings.loss {
-            Loss::None => 1.0,
-            Loss::Cauchy => {
-                let s = (r[0] * r[0] + r[1] * r[1]) * o.weight * o.weight;
-                1.0 / (1.0 + s / a2)
-            }
-        })
-        .collect()
-}
-
 /// The Jacobian at `state`, the loss's weights and H = JᵀWJ with the lens
 /// prior's information: what every covariance here starts from.
 fn weighted_normal(
@@ -463,17 +85,6 @@ fn weighted_normal(
     Ok((e, weights, n))
 }
 
-/// The Jacobian of `problem` at `state`, as this module's error.
-pub fn jacobian(
-    problem: &Problem,
-    state: &State,
-    settings: &SolverSettings,
-) -> Result<Evaluation, UncertaintyError> {
-    problem
-        .jacobian(state, settings)
-        .map_err(|e| UncertaintyError::Jacobian(e.to_string()))
-}
-
 /// [`weighted_normal`] from a Jacobian already evaluated.
 fn weighted_normal_of(
     e: &Evaluation,
@@ -481,18 +92,7 @@ fn weighted_normal_of(
     settings: &SolverSettings,
     eliminate: Eliminate,
 ) -> Result<(Vec<f64>, Normal), UncertaintyError> {
-    let rows = 2 * problem.dataset.observations.len();
-    if e.jacobian_rows != rows
-        || e.jacobian_row_ptr.len() != rows + 1
-        || e.jacobian_col_param.len() != e.jacobian_cols
-    {
-        return Err(UncertaintyError::Jacobian(format!(
-            "{} × {} with {} column labels for {rows} residuals",
-            e.jacobian_rows,
-            e.jacobian_cols,
-            e.jacobian_col_param.len()
-        )));
-    }
+    check_shape(e, problem)?;
     let weights = loss_weights(problem.dataset, settings, &e.residuals);
     let mut n = normal_matrix(e, &problem.layout(), &weights, eliminate)?;
     add_lens_prior(&mut n, &problem.lens_prior_weights(settings));
@@ -522,42 +122,23 @@ pub fn unit_covariance(
     Ok(out)
 }
 
-/// Whether the normal matrix has free static corrections, all of them kept in
-/// its dense system (what [`unit_correction_std`] needs).
-fn corrections_kept(n: &Normal, layout: &Layout) -> bool {
-    let mut any = false;
-    for (&param, role) in n.params.iter().zip(&n.roles) {
-        if param >= layout.corrections {
-            if !matches!(role, Role::Kept(_)) {
-                return false;
-            }
-            any = true;
-        }
-    }
-    any
-}
-
-/// (WJX)ᵀ(WJX), t × t, with X given per Jacobian column (t values each).
+/// (WJX)ᵀ(WJX), t × t, with X given per Jacobian column (t values each): the
+/// rows of WJX made first (one column of t values per Jacobian row), then one
+/// matrix product.
 fn sandwich(e: &Evaluation, weights: &[f64], x: &[f64], t: usize) -> DMatrix<f64> {
-    let mut out = DMatrix::zeros(t, t);
-    let mut y = vec![0.0; t];
-    for r in 0..e.jacobian_rows {
-        y.iter_mut().for_each(|v| *v = 0.0);
+    let mut y = DMatrix::<f64>::zeros(t, e.jacobian_rows);
+    for (r, column) in y.as_mut_slice().chunks_exact_mut(t.max(1)).enumerate() {
         for i in e.jacobian_row_ptr[r] as usize..e.jacobian_row_ptr[r + 1] as usize {
             let (col, v) = (e.jacobian_col_idx[i] as usize, e.jacobian_values[i]);
-            // Over slices, so that it vectorises; each y[u] sums in the same order.
-            for (yu, xu) in y.iter_mut().zip(&x[col * t..(col + 1) * t]) {
+            // Over slices, so that it vectorises.
+            for (yu, xu) in column.iter_mut().zip(&x[col * t..(col + 1) * t]) {
                 *yu += v * xu;
             }
         }
         let w = weights[r / 2];
-        for a in 0..t {
-            for b in 0..t {
-                out[(a, b)] += w * w * y[a] * y[b];
-            }
-        }
+        column.iter_mut().for_each(|v| *v *= w);
     }
-    out
+    &y * y.transpose()
 }
 
 /// Splits Σ over all free intrinsics into each camera's n × n block.
@@ -591,56 +172,6 @@ fn per_camera(
             cov
         })
         .collect()
-}
-
-/// The standard deviation of every static correction value at unit noise (3 per
-/// corner; 0 for a held value), from the same normal matrix as
-/// [`unit_covariance`]; `Err` when the problem has no free correction or when the
-/// corrections are the eliminated blocks (fewer values in the images' blocks than
-/// in the corners', so a dataset too small to measure a board anyway).
-pub fn unit_correction_std(
-    problem: &Problem,
-    state: &State,
-    settings: &SolverSettings,
-) -> Result<Vec<[f64; 3]>, UncertaintyError> {
-    let d = problem.dataset;
-    let layout = problem.layout();
-    let (e, weights, mut n) = weighted_normal(problem, state, settings, Eliminate::Smaller)?;
-    let targets: Vec<usize> = (0..n.params.len())
-        .filter(|&col| n.params[col] >= layout.corrections)
-        .collect();
-    if !corrections_kept(&n, &layout) {
-        return Err(UncertaintyError::Jacobian(
-            "the corrections are not determined well enough for a covariance".into(),
-        ));
-    }
-    let scale = jacobi_scale(d, &layout, &mut n)?;
-    eliminate(d, &layout, &mut n)?;
-    let x = solve_columns(&n, &scale, &targets);
-    // Only the diagonal of the sandwich (WJX)ᵀ(WJX): one value per target.
-    let t = targets.len();
-    let mut var = vec![0.0; t];
-    let mut y = vec![0.0; t];
-    for r in 0..e.jacobian_rows {
-        y.iter_mut().for_each(|v| *v = 0.0);
-        for i in e.jacobian_row_ptr[r] as usize..e.jacobian_row_ptr[r + 1] as usize {
-            let (col, v) = (e.jacobian_col_idx[i] as usize, e.jacobian_values[i]);
-            // Over slices, so that it vectorises; each y[u] sums in the same order.
-            for (yu, xu) in y.iter_mut().zip(&x[col * t..(col + 1) * t]) {
-                *yu += v * xu;
-            }
-        }
-        let w2 = weights[r / 2] * weights[r / 2];
-        for (vu, yu) in var.iter_mut().zip(&y) {
-            *vu += w2 * yu * yu;
-        }
-    }
-    let mut out = vec![[0.0; 3]; d.target.num_corners()];
-    for (u, &col) in targets.iter().enumerate() {
-        let i = n.params[col] - layout.corrections;
-        out[i / CORRECTION_STRIDE][i % CORRECTION_STRIDE] = var[u].sqrt();
-    }
-    Ok(out)
 }
 
 /// The static corrections' marginal information at unit noise, with each
