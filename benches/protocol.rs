@@ -155,6 +155,7 @@ fn phases(setup: &Setup, n: usize) {
         f();
         *cpu.entry(what).or_default() += thread_cpu_seconds() - c;
     };
+    let mut thetas = Vec::new();
     for subset in setup.subsets.iter().take(n) {
         let data = setup.dataset.subset(subset);
         let warm = SharedWarmStart::default();
@@ -177,6 +178,7 @@ fn phases(setup: &Setup, n: usize) {
                 c.assessment.uncertainty = c.uncertainty_at(c.assessment.trust.as_ref());
             });
             let theta = c.state.intrinsics[0];
+            thetas.push(theta);
             timed("test-error refit".into(), &mut || {
                 test.rmse_px(&theta).expect("refit");
             });
@@ -190,6 +192,24 @@ fn phases(setup: &Setup, n: usize) {
             });
         }
     }
+    // The refits alone, again, the least of three rounds: steadier than the
+    // sum above on a shared machine.
+    let best = (0..3)
+        .map(|_| {
+            let c = thread_cpu_seconds();
+            for theta in &thetas {
+                std::hint::black_box(test.rmse_px(theta).expect("refit"));
+            }
+            thread_cpu_seconds() - c
+        })
+        .fold(f64::INFINITY, f64::min);
+    println!(
+        "  the {} test-error refits again, least of 3 rounds: {:.1} ms CPU per subset, {:.1} us per reference frame",
+        thetas.len(),
+        best / n.min(setup.subsets.len()) as f64 * 1e3,
+        best / thetas.len() as f64 / reference.dataset.num_frames() as f64 * 1e6
+    );
+    compare_refits(&thetas, &test);
     let total: f64 = cpu.values().sum();
     for (what, s) in &cpu {
         println!(
@@ -204,4 +224,36 @@ fn phases(setup: &Setup, n: usize) {
         total / n as f64 * setup.subsets.len() as f64,
         setup.subsets.len()
     );
+}
+
+/// `REFIT_SAVE=file` writes the test errors of the phases' calibrations (one
+/// per line, full precision); `REFIT_PREVIOUS=file` compares them with a saved
+/// run's: a change of the refit must leave every value at the same optimum.
+fn compare_refits(thetas: &[deformcal::model::lens::Intrinsics], test: &TestError) {
+    let values: Vec<f64> = thetas
+        .iter()
+        .map(|t| test.rmse_px(t).expect("refit"))
+        .collect();
+    if let Ok(path) = std::env::var("REFIT_SAVE") {
+        let text: String = values.iter().map(|v| format!("{v:e}\n")).collect();
+        std::fs::write(&path, text).expect("REFIT_SAVE");
+    }
+    if let Ok(path) = std::env::var("REFIT_PREVIOUS") {
+        let text = std::fs::read_to_string(&path).expect("REFIT_PREVIOUS");
+        let previous: Vec<f64> = text.lines().map(|l| l.parse().expect("a value")).collect();
+        assert_eq!(
+            previous.len(),
+            values.len(),
+            "REFIT_PREVIOUS has another count"
+        );
+        let worst = values
+            .iter()
+            .zip(&previous)
+            .map(|(a, b)| ((a - b) / b).abs())
+            .fold(0.0, f64::max);
+        println!(
+            "  test errors against {path}: largest relative difference {worst:.1e} over {}",
+            values.len()
+        );
+    }
 }
