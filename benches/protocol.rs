@@ -108,6 +108,10 @@ fn main() {
     if setup.settings.per_corner_blocks {
         return;
     }
+    // Each pool thread's CPU over the run: on a shared machine the wall time
+    // cannot show whether both threads worked to the end, their CPU can (a
+    // thread idle while the other works has that much less).
+    let threads_before = rayon::broadcast(|_| thread_cpu_seconds());
     let before = process_cpu_seconds();
     let t = Instant::now();
     let planned = plan(&config, &protocol).expect("plan");
@@ -124,6 +128,15 @@ fn main() {
         beside.len(),
         t.elapsed().as_secs_f64(),
         process_cpu_seconds() - before
+    );
+    let per_thread: Vec<String> = rayon::broadcast(|_| thread_cpu_seconds())
+        .iter()
+        .zip(&threads_before)
+        .map(|(a, b)| format!("{:.2}", a - b))
+        .collect();
+    println!(
+        "  CPU of each pool thread over it (s): {}",
+        per_thread.join(", ")
     );
 }
 
