@@ -78,7 +78,7 @@ fn main() {
     };
     let (new, old) = (refit(false), refit(true));
     println!(
-        "reference calibration + data: {prepared:.2} s ({prepared_cpu:.2} s CPU); one test-error refit on {} images: {:.1} ms CPU (RMSE {:.12}), previous path {:.1} ms CPU (RMSE {:.12})",
+        "reference calibration + data: {prepared:.2} s ({prepared_cpu:.2} s CPU); one test-error refit on {} images, prepared and run once: {:.1} ms CPU (RMSE {:.12}), previous path {:.1} ms CPU (RMSE {:.12})",
         reference.dataset.num_frames(),
         new.0 * 1e3,
         new.1,
@@ -108,9 +108,14 @@ fn main() {
     if setup.settings.per_corner_blocks {
         return;
     }
+    // Each pool thread's CPU over the run: on a shared machine the wall time
+    // cannot show whether both threads worked to the end, their CPU can (a
+    // thread idle while the other works has that much less).
+    let threads_before = rayon::broadcast(|_| thread_cpu_seconds());
     let before = process_cpu_seconds();
     let t = Instant::now();
     let planned = plan(&config, &protocol).expect("plan");
+    let planning = t.elapsed().as_secs_f64();
     let (planned, beside) = planned
         .run_beside_reference(None, &|| {})
         .expect("protocol");
@@ -120,10 +125,19 @@ fn main() {
         "the rows depend on when the reference is calibrated"
     );
     println!(
-        "the CLI's path (data, then the reference beside the {} calibrations): {:.2} s wall, {:.2} s CPU",
+        "the CLI's path (data, then the reference beside the {} calibrations): {:.2} s wall, {:.2} s CPU; its data {planning:.2} s wall",
         beside.len(),
         t.elapsed().as_secs_f64(),
         process_cpu_seconds() - before
+    );
+    let per_thread: Vec<String> = rayon::broadcast(|_| thread_cpu_seconds())
+        .iter()
+        .zip(&threads_before)
+        .map(|(a, b)| format!("{:.2}", a - b))
+        .collect();
+    println!(
+        "  CPU of each pool thread over it (s): {}",
+        per_thread.join(", ")
     );
 }
 
@@ -155,6 +169,7 @@ fn phases(setup: &Setup, n: usize) {
         f();
         *cpu.entry(what).or_default() += thread_cpu_seconds() - c;
     };
+    let mut thetas = Vec::new();
     for subset in setup.subsets.iter().take(n) {
         let data = setup.dataset.subset(subset);
         let warm = SharedWarmStart::default();
@@ -177,6 +192,7 @@ fn phases(setup: &Setup, n: usize) {
                 c.assessment.uncertainty = c.uncertainty_at(c.assessment.trust.as_ref());
             });
             let theta = c.state.intrinsics[0];
+            thetas.push(theta);
             timed("test-error refit".into(), &mut || {
                 test.rmse_px(&theta).expect("refit");
             });
@@ -190,6 +206,24 @@ fn phases(setup: &Setup, n: usize) {
             });
         }
     }
+    // The refits alone, again, the least of three rounds: steadier than the
+    // sum above on a shared machine.
+    let best = (0..3)
+        .map(|_| {
+            let c = thread_cpu_seconds();
+            for theta in &thetas {
+                std::hint::black_box(test.rmse_px(theta).expect("refit"));
+            }
+            thread_cpu_seconds() - c
+        })
+        .fold(f64::INFINITY, f64::min);
+    println!(
+        "  the {} test-error refits again, least of 3 rounds: {:.1} ms CPU per subset, {:.1} us per reference frame",
+        thetas.len(),
+        best / n.min(setup.subsets.len()) as f64 * 1e3,
+        best / thetas.len() as f64 / reference.dataset.num_frames() as f64 * 1e6
+    );
+    compare_refits(&thetas, &test);
     let total: f64 = cpu.values().sum();
     for (what, s) in &cpu {
         println!(
@@ -204,4 +238,36 @@ fn phases(setup: &Setup, n: usize) {
         total / n as f64 * setup.subsets.len() as f64,
         setup.subsets.len()
     );
+}
+
+/// `REFIT_SAVE=file` writes the test errors of the phases' calibrations (one
+/// per line, full precision); `REFIT_PREVIOUS=file` compares them with a saved
+/// run's: a change of the refit must leave every value at the same optimum.
+fn compare_refits(thetas: &[deformcal::model::lens::Intrinsics], test: &TestError) {
+    let values: Vec<f64> = thetas
+        .iter()
+        .map(|t| test.rmse_px(t).expect("refit"))
+        .collect();
+    if let Ok(path) = std::env::var("REFIT_SAVE") {
+        let text: String = values.iter().map(|v| format!("{v:e}\n")).collect();
+        std::fs::write(&path, text).expect("REFIT_SAVE");
+    }
+    if let Ok(path) = std::env::var("REFIT_PREVIOUS") {
+        let text = std::fs::read_to_string(&path).expect("REFIT_PREVIOUS");
+        let previous: Vec<f64> = text.lines().map(|l| l.parse().expect("a value")).collect();
+        assert_eq!(
+            previous.len(),
+            values.len(),
+            "REFIT_PREVIOUS has another count"
+        );
+        let worst = values
+            .iter()
+            .zip(&previous)
+            .map(|(a, b)| ((a - b) / b).abs())
+            .fold(0.0, f64::max);
+        println!(
+            "  test errors against {path}: largest relative difference {worst:.1e} over {}",
+            values.len()
+        );
+    }
 }

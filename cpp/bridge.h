@@ -33,8 +33,10 @@ Evaluation evaluate(const ProblemData& data, const SolveOptions& options, bool w
 
 // A pose-only refit prepared once, for refits under many intrinsics (the
 // protocol's test error: every calibration against the same reference).  The
-// frames' corners and held board points are kept; each refit starts from the
-// prepared poses and keeps no state, so one PoseRefit may serve many threads.
+// frames' corners and held board points are kept with each frame's optimum
+// under the prepared intrinsics; each refit starts from those optima moved to
+// first order by its intrinsics and keeps no state, so one PoseRefit may serve
+// many threads.
 struct PoseRefitState;
 class PoseRefit {
  public:

@@ -32,45 +32,72 @@
 namespace deformcal {
 namespace ffi {
 
-// What a prepared pose refit keeps: everything but the intrinsics.
+// What a prepared pose refit keeps: everything but the intrinsics, and each
+// frame's optimum under the prepared intrinsics with its first-order move.
 struct PoseRefitState {
   FrameCorners frames;
-  std::vector<double> start_poses;  // kPoseSize per frame
+  std::vector<double> start_poses;  // kPoseSize per frame: the optimum under `intrinsics`
+  // Per frame, PoseSensitivity at its start pose (empty where there is none).
+  std::vector<std::vector<double>> sensitivities;
+  std::vector<double> intrinsics;  // every camera's, in camera order, as prepared
+  std::vector<size_t> offsets;     // per camera, where its intrinsics start
   std::vector<MakePoseViewFn> make;
   std::vector<size_t> num_params;  // per camera
   std::vector<double> rig_poses;   // kPoseSize per camera
   int max_iterations = 0;
 };
 
+namespace {
+
+// Frame j's start under `lens`: its prepared optimum moved to first order by
+// the change of its views' intrinsics from the prepared ones.
+void PredictedPose(const PoseRefitState& s, size_t j, const std::vector<const double*>& lens,
+                   double* pose) {
+  std::copy_n(&s.start_poses[kPoseSize * j], kPoseSize, pose);
+  const std::vector<double>& S = s.sensitivities[j];
+  if (S.empty()) return;
+  size_t col = 0;
+  for (const ViewCorners& v : s.frames[j]) {
+    const double* prepared = &s.intrinsics[s.offsets[v.camera]];
+    for (size_t q = 0; q < s.num_params[v.camera]; ++q, ++col) {
+      const double d = lens[v.camera][q] - prepared[q];
+      for (int i = 0; i < kPoseSize; ++i) pose[i] -= S[kPoseSize * col + i] * d;
+    }
+  }
+}
+
+}  // namespace
+
 PoseRefit::PoseRefit(std::unique_ptr<const PoseRefitState> state) : state_(std::move(state)) {}
 PoseRefit::~PoseRefit() = default;
 
 double PoseRefit::rmse_px(rust::Slice<const double> intrinsics) const {
   const PoseRefitState& s = *state_;
-  std::vector<const double*> lens(s.num_params.size()), rigs(s.num_params.size(), nullptr);
-  size_t at = 0;
-  for (size_t k = 0; k < s.num_params.size(); ++k) {
-    lens[k] = intrinsics.data() + at;
-    at += s.num_params[k];
-    if (k > 0) rigs[k] = &s.rig_poses[kPoseSize * k];
-  }
-  if (at != intrinsics.size()) {
+  if (s.intrinsics.size() != intrinsics.size()) {
     Fail("the refit's intrinsics have " + std::to_string(intrinsics.size()) + " values, expected " +
-         std::to_string(at));
+         std::to_string(s.intrinsics.size()));
+  }
+  std::vector<const double*> lens(s.num_params.size()), rigs(s.num_params.size(), nullptr);
+  for (size_t k = 0; k < s.num_params.size(); ++k) {
+    lens[k] = intrinsics.data() + s.offsets[k];
+    if (k > 0) rigs[k] = &s.rig_poses[kPoseSize * k];
   }
   double sum = 0.0;
   size_t corners = 0;
   for (size_t j = 0; j < s.frames.size(); ++j) {
     if (s.frames[j].empty()) continue;
     double pose[kPoseSize];
-    std::copy_n(&s.start_poses[kPoseSize * j], kPoseSize, pose);
+    PredictedPose(s, j, lens, pose);
     const auto views = FrameViews(s.frames[j], s.make, lens, rigs);
-    bool ok = RefitFramePose(views, pose, s.max_iterations).ok;
-    for (size_t v = 0; v < views.size() && ok; ++v) {
-      ok = views[v]->SquaredError(pose, &sum);
-      corners += s.frames[j][v].corners.size();
+    PoseRefitResult fit = RefitFramePose(views, pose, s.max_iterations);
+    if (!fit.ok && !s.sensitivities[j].empty()) {
+      // The prediction went where a point has no image: from the optimum as prepared.
+      std::copy_n(&s.start_poses[kPoseSize * j], kPoseSize, pose);
+      fit = RefitFramePose(views, pose, s.max_iterations);
     }
-    if (!ok || !std::isfinite(sum)) {
+    sum += fit.squared_error;
+    for (const ViewCorners& v : s.frames[j]) corners += v.corners.size();
+    if (!fit.ok || !std::isfinite(sum)) {
       Fail("frame " + std::to_string(j) + ": a board point has no image under the held intrinsics");
     }
   }
@@ -87,17 +114,37 @@ std::unique_ptr<PoseRefit> prepare_pose_refit(const ProblemData& data, const Sol
     RequirePoseOnly<Board>(data, options);
     state->frames = CollectFrames<Board>(data, params);
   });
-  for (size_t j = 0; j < data.num_frames; ++j) {
-    state->start_poses.insert(state->start_poses.end(), params.Frame(j), params.Frame(j) + kPoseSize);
-  }
   state->make = PoseViewMakers(data);
+  std::vector<const double*> lens;
   for (size_t k = 0; k < data.num_cameras; ++k) {
     DispatchLens(std::string(data.lens_models[k]),
                  [&](auto lens) { state->num_params.push_back(decltype(lens)::kNumParams); });
+    state->offsets.push_back(state->intrinsics.size());
+    state->intrinsics.insert(state->intrinsics.end(), params.intrinsics[k],
+                             params.intrinsics[k] + state->num_params[k]);
     state->rig_poses.insert(state->rig_poses.end(), params.camera_poses[k],
                             params.camera_poses[k] + kPoseSize);
   }
+  for (size_t k = 0; k < data.num_cameras; ++k) lens.push_back(&state->intrinsics[state->offsets[k]]);
+  const std::vector<const double*> rigs = RigPoses(params.camera_poses);
+  state->sensitivities.resize(data.num_frames);
   state->max_iterations = options.max_iterations;
+  // Each frame refitted under the prepared intrinsics once: a refit under
+  // others then starts from this optimum moved to first order, a step or two
+  // from its own.  A frame whose refit fails keeps its pose and no prediction.
+  for (size_t j = 0; j < data.num_frames; ++j) {
+    double pose[kPoseSize];
+    std::copy_n(params.Frame(j), kPoseSize, pose);
+    if (!state->frames[j].empty()) {
+      const auto views = FrameViews(state->frames[j], state->make, lens, rigs);
+      const PoseRefitResult fit = RefitFramePose(views, pose, options.max_iterations);
+      if (!fit.ok || !fit.converged || !PoseSensitivity(views, pose, &state->sensitivities[j])) {
+        std::copy_n(params.Frame(j), kPoseSize, pose);
+        state->sensitivities[j].clear();
+      }
+    }
+    state->start_poses.insert(state->start_poses.end(), pose, pose + kPoseSize);
+  }
   return std::make_unique<PoseRefit>(std::move(state));
 }
 

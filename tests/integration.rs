@@ -31,6 +31,7 @@ mod opencv;
 mod opencv_photos;
 mod photo_noise;
 mod photos;
+mod pose_refit;
 mod printable;
 mod protocol;
 mod protocol_shards;

@@ -335,7 +335,7 @@ fn pose_only_refit_evaluates_like_the_general_problem() {
 }
 
 /// Tolerances tight enough that Ceres stops at the optimum to round-off.
-fn converged(settings: &SolverSettings) -> SolverSettings {
+pub(crate) fn converged(settings: &SolverSettings) -> SolverSettings {
     SolverSettings {
         function_tolerance: 1e-16,
         gradient_tolerance: 1e-16,
@@ -604,7 +604,7 @@ fn cli_batch_writes_one_combined_report() {
 /// A 2-camera rig (of `models`, the preset's lenses without) on 8 bent T2
 /// frames, a third of the corners weighted 0.5, started at the truth with every
 /// frame pose moved.
-fn rig_refit_case(models: Option<&[LensModel]>) -> (deformcal::Dataset, State) {
+pub(crate) fn rig_refit_case(models: Option<&[LensModel]>) -> (deformcal::Dataset, State) {
     let gen = Generator::new(Preset::T2, Some(8), 3).with_cameras(2);
     let gen = match models {
         Some(m) => gen.with_models(m),
@@ -631,7 +631,7 @@ fn rig_refit_case(models: Option<&[LensModel]>) -> (deformcal::Dataset, State) {
 }
 
 /// `dynamic` with everything but the board poses held: a pose-only refit.
-fn held_dynamic(data: &deformcal::Dataset) -> Problem<'_> {
+pub(crate) fn held_dynamic(data: &deformcal::Dataset) -> Problem<'_> {
     Problem {
         dataset: data,
         method: Method::Dynamic,

@@ -586,8 +586,9 @@ impl Problem<'_> {
 }
 
 /// A pose-only refit prepared once ([`Problem::prepare_pose_refit`]): the
-/// frames' corners and held board points are kept in C++, and every refit
-/// starts from the same poses, so one serves many threads.
+/// frames' corners and held board points are kept in C++ with each frame's
+/// optimum under the prepared intrinsics, and every refit starts from those
+/// optima moved to first order by its intrinsics, so one serves many threads.
 pub struct PreparedRefit {
     refit: cxx::UniquePtr<ffi::PoseRefit>,
 }
