@@ -175,8 +175,8 @@ impl Intrinsics {
         let p = self.params();
         let m = Vector2::new((uv.x - p[2]) / p[0], (uv.y - p[3]) / p[1]);
         let ray = match self.model.info().projection {
-            Projection::PinholeLike { distort, .. } => {
-                let n = pinhole_like::undistort(distort, p, &m)?;
+            Projection::PinholeLike { derivatives, .. } => {
+                let n = pinhole_like::undistort(derivatives, p, &m)?;
                 Vector3::new(n.x, n.y, 1.0)
             }
             Projection::Central { unproject, .. } => unproject(p, &m)?,

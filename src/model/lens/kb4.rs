@@ -89,13 +89,13 @@ fn theta_d(p: &[f64], theta: f64) -> f64 {
     theta * (1.0 + t2 * (p[4] + t2 * (p[5] + t2 * (p[6] + t2 * p[7]))))
 }
 
-/// The angle θ ∈ [0, π) with θd(θ) = `target` on the increasing branch.
 /// dθd/dθ.
 fn theta_d_slope(p: &[f64], theta: f64) -> f64 {
     let t2 = theta * theta;
     1.0 + t2 * (3.0 * p[4] + t2 * (5.0 * p[5] + t2 * (7.0 * p[6] + t2 * 9.0 * p[7])))
 }
 
+/// The angle θ ∈ [0, π) with θd(θ) = `target` on the increasing branch.
 fn theta_of(p: &[f64], target: f64) -> Option<f64> {
     let slope = |t: f64| theta_d_slope(p, t);
     let mut theta = target.min(3.0);

@@ -142,3 +142,41 @@ fn json_round_trip_keeps_the_model() {
         serde_json::from_str::<Intrinsics>(r#"{"fx":1,"fy":1,"cx":0,"cy":0,"k9":0}"#).unwrap_err();
     assert!(err.to_string().contains("match no lens model"), "{err}");
 }
+
+/// `radial3` with k1 = −0.3 alone: the distorted radius r (1 − 0.3 r²) rises to
+/// its fold at r = 1/√0.9, where it is 2/(3√0.9) ≈ 0.7027. Below the fold the
+/// unprojection is the one root there (found here by bisection, independently of
+/// Newton's method); beyond it no ray maps to the pixel.
+#[test]
+fn unprojection_inverts_the_distortion_up_to_its_fold() {
+    let k1 = -0.3;
+    let (f, cx, cy) = (1000.0, 640.0, 360.0);
+    let k = Intrinsics::from_params(LensModel::Radial3, &[f, f, cx, cy, k1, 0.0, 0.0]).unwrap();
+    let fold_r = 1.0 / (-3.0 * k1).sqrt();
+    let distorted = |r: f64| r * (1.0 + k1 * r * r);
+    let fold = distorted(fold_r);
+    for rd in [0.0, 0.1, 0.3, 0.5, 0.65, 0.99 * fold, 1.01 * fold, 0.8, 1.0] {
+        for angle in [0.0, 0.7, 2.0, 3.5, 5.1_f64] {
+            let uv = Vector2::new(cx + f * rd * angle.cos(), cy + f * rd * angle.sin());
+            let ray = k.unproject(&uv);
+            if rd > fold {
+                assert!(ray.is_none(), "r_d {rd} beyond the fold {fold}: {ray:?}");
+                continue;
+            }
+            let ray = ray.unwrap_or_else(|| panic!("r_d {rd} below the fold {fold}: no ray"));
+            let (mut lo, mut hi) = (0.0, fold_r);
+            for _ in 0..200 {
+                let mid = 0.5 * (lo + hi);
+                if distorted(mid) < rd {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+            let r = (ray.x * ray.x + ray.y * ray.y).sqrt() / ray.z;
+            assert!((r - lo).abs() < 1e-12, "r_d {rd}: {r} against {lo}");
+            let back = k.project(&ray).unwrap();
+            assert!((back - uv).norm() < 1e-9, "r_d {rd}: {back} against {uv}");
+        }
+    }
+}
