@@ -63,6 +63,11 @@ fn assert_same_numbers(a: &serde_json::Value, b: &serde_json::Value, tol: f64, a
 /// OpenCV's left sample photos (9×6 inner corners, 25 mm in OpenCV's sample
 /// calibration), copied into `dir/photos`; None (the test skips) without them.
 fn left_photos(dir: &Path) -> Option<PathBuf> {
+    sample_photos_of(dir, &["left"])
+}
+
+/// OpenCV's sample photos of the given sides (`left`, `right`) in `dir/photos`.
+fn sample_photos_of(dir: &Path, sides: &[&str]) -> Option<PathBuf> {
     let system = Path::new("/usr/share/doc/opencv-doc/examples/data");
     let source = if system.join("left01.jpg").exists() {
         system.to_path_buf()
@@ -77,10 +82,12 @@ fn left_photos(dir: &Path) -> Option<PathBuf> {
     };
     let photos = dir.join("photos");
     std::fs::create_dir_all(&photos).unwrap();
-    for k in 1..=14 {
-        let name = format!("left{k:02}.jpg");
-        if source.join(&name).exists() {
-            std::fs::copy(source.join(&name), photos.join(&name)).unwrap();
+    for side in sides {
+        for k in 1..=14 {
+            let name = format!("{side}{k:02}.jpg");
+            if source.join(&name).exists() {
+                std::fs::copy(source.join(&name), photos.join(&name)).unwrap();
+            }
         }
     }
     Some(photos)
@@ -157,6 +164,100 @@ fn flags_alone_equal_the_config_and_the_written_config_reruns_it() {
     ));
     let rerun = json(&d.join("rerun/calibration.json"));
     assert_same_numbers(&by_flags, &rerun, 1e-12, "calibration");
+}
+
+/// A photo map given by flags alone makes one camera per pattern, named by its
+/// key and sized from its own first photo: the same calibration as the config
+/// that spells both cameras out. A config file with the map and no
+/// `[[cameras]]` is completed the same way, for `calibrate` and `detect` alike.
+#[test]
+fn a_photo_map_makes_one_camera_per_pattern() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    if sample_photos_of(d, &["left", "right"]).is_none() {
+        return;
+    }
+    let map = r#"data.photos={ right = "photos/right*.jpg", left = "photos/left*.jpg" }"#;
+    let common = [
+        "--board", "9x6", "--square", "0.025", "--method", "standard",
+    ];
+    let mut args = vec!["calibrate", "--set", map, "--model", "opencv5"];
+    args.extend(common);
+    args.extend(["--output", "by_flags"]);
+    let stderr = succeeds(&deformcal_in(d, &args));
+    for line in [
+        "image size 640×480 px for camera left, from photos/left01.jpg",
+        "image size 640×480 px for camera right, from photos/right01.jpg",
+    ] {
+        assert!(stderr.contains(line), "{line}: {stderr}");
+    }
+    let by_flags = json(&d.join("by_flags/calibration.json"));
+    let names: Vec<&str> = by_flags["cameras"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["left", "right"]);
+    assert_eq!(by_flags["cameras"][1]["model"], "opencv5");
+
+    let photos =
+        "[data]\nphotos = { left = \"photos/left*.jpg\", right = \"photos/right*.jpg\" }\n";
+    let board =
+        "[target]\nrows = 6\ncols = 9\nspacing = 0.025\n[calibration]\nmethod = \"standard\"\n";
+    let cameras: String = ["left", "right"]
+        .iter()
+        .map(|n| {
+            format!("[[cameras]]\nname = \"{n}\"\nwidth = 640\nheight = 480\nmodel = \"opencv5\"\n")
+        })
+        .collect();
+    std::fs::write(
+        d.join("full.toml"),
+        format!("{board}{cameras}{photos}[output]\ndir = \"by_config\"\n"),
+    )
+    .unwrap();
+    succeeds(&deformcal_in(d, &["--config", "full.toml"]));
+    let by_config = json(&d.join("by_config/calibration.json"));
+    let compared = assert_same_numbers(&by_flags, &by_config, 1e-12, "calibration");
+    assert!(compared > 100, "only {compared} numbers compared");
+
+    // The map alone in a file: `detect` and `calibrate` complete it alike.
+    std::fs::write(
+        d.join("map.toml"),
+        format!("{board}{photos}[output]\ndir = \"by_map\"\n"),
+    )
+    .unwrap();
+    let detected = succeeds(&deformcal_in(d, &["detect", "--config", "map.toml"]));
+    assert!(
+        detected.contains("board found in 26 of 26 images"),
+        "{detected}"
+    );
+    succeeds(&deformcal_in(
+        d,
+        &["calibrate", "--config", "map.toml", "--model", "opencv5"],
+    ));
+    let by_map = json(&d.join("by_map/calibration.json"));
+    assert_same_numbers(&by_flags, &by_map, 1e-12, "calibration");
+
+    // One pattern and no `[[cameras]]`: `cam0`, sized from its first photo.
+    let one = "[data]\nphotos = \"photos/left*.jpg\"\n";
+    let cam0 = "[[cameras]]\nname = \"cam0\"\nwidth = 640\nheight = 480\n";
+    for (file, text) in [
+        ("one.toml", format!("{board}{one}[output]\ndir = \"one\"\n")),
+        (
+            "one_full.toml",
+            format!("{board}{cam0}{one}[output]\ndir = \"one_full\"\n"),
+        ),
+    ] {
+        std::fs::write(d.join(file), text).unwrap();
+        succeeds(&deformcal_in(d, &["--config", file]));
+    }
+    let (one, one_full) = (
+        json(&d.join("one/calibration.json")),
+        json(&d.join("one_full/calibration.json")),
+    );
+    assert_eq!(one["cameras"][0]["name"], "cam0");
+    assert!(assert_same_numbers(&one, &one_full, 1e-12, "calibration") > 50);
 }
 
 /// A t2 observations CSV (13×13 board, 1936×1216, known truth) in `dir`.

@@ -114,7 +114,7 @@ pub fn run_import(args: ImportArgs) -> Result<()> {
 
 /// `deformcal detect`.
 pub fn run_detect(args: DetectArgs) -> Result<()> {
-    let mut config = Config::load(&args.config)?;
+    let mut config = super::flags::file_config(&args.config)?;
     if let Some(o) = args.output {
         config.output_dir = o;
     }

@@ -80,8 +80,8 @@ pub struct CalibrateArgs {
     /// cameras.model.
     #[arg(long, value_name = "MODEL", help_heading = "Cameras")]
     pub model: Option<String>,
-    /// Image size of every camera, pixels, e.g. 640x480 (with --photos, read from
-    /// the first photo when not given). Sets cameras.width and cameras.height.
+    /// Image size of every camera, pixels, e.g. 640x480 (with photos, each camera's
+    /// read from its first photo when not given). Sets cameras.width and cameras.height.
     #[arg(long = "image-size", value_name = "WxH", help_heading = "Cameras")]
     pub image_size: Option<String>,
     /// Lens parameters held at their initial values, e.g. k3 or p1,p2,k3 (OpenCV's
@@ -180,13 +180,18 @@ pub fn config(args: &CalibrateArgs) -> Result<(Document, Config)> {
         "no data given: use --config FILE (see configs/ for examples), or give the data as \
          --photos, --video, --observations, --corners-vnl or --synthetic (see `deformcal calibrate --help`)"
     );
+    let file_has_cameras = !doc.cameras().is_empty();
     apply_source(&mut doc, args)?;
     apply_board(&mut doc, args)?;
+    // Before the camera flags when the file holds the photo map, so that they
+    // apply to each camera, and again after `--set`, which may give the map.
+    cameras_from_photo_map(&mut doc, file_has_cameras);
     apply_cameras(&mut doc, args)?;
     apply_settings(&mut doc, args)?;
     for assignment in &args.set {
         doc.set_assignment(assignment, "--set")?;
     }
+    cameras_from_photo_map(&mut doc, file_has_cameras);
     image_size_from_photos(&mut doc)?;
     image_size_from_video(&mut doc)?;
     let mut config = match doc.config() {
@@ -199,6 +204,17 @@ pub fn config(args: &CalibrateArgs) -> Result<(Document, Config)> {
         config.output_dir = PathBuf::from(dir);
     }
     Ok((doc, config))
+}
+
+/// A config file completed as `deformcal calibrate --config FILE` completes it
+/// (cameras from a photo map, image sizes from the photos), for the commands that
+/// read the same file (`detect`).
+pub fn file_config(path: &std::path::Path) -> Result<Config> {
+    let args = CalibrateArgs {
+        config: Some(path.to_path_buf()),
+        ..CalibrateArgs::default()
+    };
+    Ok(config(&args)?.1)
 }
 
 /// A config error of a run without a file says which flag would avoid it.
@@ -394,33 +410,94 @@ fn pair(text: &str) -> Option<(i64, i64)> {
     Some((parse(a)?, parse(b)?))
 }
 
-/// With one photo pattern and cameras without an image size, the size is read
-/// from the first photo that has one (a header read, not a decode).
+/// With one photo pattern per camera (`data.photos = { left = "l*.jpg", right =
+/// "r*.jpg" }`) and no `[[cameras]]` in the file, the cameras are the map's names,
+/// in its (sorted) order, the first being the rig's reference: each with what the
+/// flags gave every camera. Cameras the flags named one by one are left to the
+/// config's check, which says what is missing.
+fn cameras_from_photo_map(doc: &mut Document, file_has_cameras: bool) {
+    let Some(map) = doc.get("data", "photos").and_then(Value::as_table) else {
+        return;
+    };
+    if file_has_cameras {
+        return;
+    }
+    let names: Vec<String> = map.keys().cloned().collect();
+    let cameras = doc.cameras();
+    let current: Vec<Option<&str>> = cameras
+        .iter()
+        .map(|c| c.get("name").and_then(Value::as_str))
+        .collect();
+    let made_by_flags = current.is_empty() || current == [Some("cam0")];
+    if made_by_flags && current != names.iter().map(|n| Some(n.as_str())).collect::<Vec<_>>() {
+        doc.cameras_named(&names, "data.photos");
+    }
+}
+
+/// Cameras without an image size take it from their first photo that has one
+/// (a header read, not a decode): with one photo pattern, every camera (there is
+/// one) from it; with one pattern per camera, each from its own.
 fn image_size_from_photos(doc: &mut Document) -> Result<()> {
-    let Some(pattern) = doc.get("data", "photos").and_then(Value::as_str) else {
-        return Ok(());
+    let patterns: Vec<(Option<String>, String)> = match doc.get("data", "photos") {
+        Some(Value::String(p)) => vec![(None, p.clone())],
+        Some(Value::Table(map)) => map
+            .iter()
+            .filter_map(|(name, p)| Some((Some(name.clone()), p.as_str()?.to_string())))
+            .collect(),
+        _ => return Ok(()),
     };
     let cameras = doc.cameras();
-    let sized = |c: &&toml::Table| c.contains_key("width") && c.contains_key("height");
-    if cameras.len() > 1 || (!cameras.is_empty() && cameras.iter().all(sized)) {
-        return Ok(());
-    }
-    let pattern = pattern.to_string();
-    let base = doc.base();
-    let names = crate::app::photos::list::matching(&base, &pattern)?;
-    let Some((name, (w, h))) = names.iter().find_map(|n| {
-        let size = image::image_dimensions(base.join(n)).ok()?;
-        Some((n, size))
-    }) else {
-        anyhow::bail!(
-            "--photos {pattern}: none of the {} files is an image",
-            names.len()
-        );
+    let sized = |c: &toml::Table| c.contains_key("width") && c.contains_key("height");
+    // (camera index, or every camera, and its pattern) for each camera to size.
+    let wanted: Vec<(Option<usize>, String)> = match patterns.as_slice() {
+        [(None, pattern)] if cameras.is_empty() || (cameras.len() == 1 && !sized(cameras[0])) => {
+            vec![(None, pattern.clone())]
+        }
+        [(None, _)] => Vec::new(),
+        _ => cameras
+            .iter()
+            .enumerate()
+            .filter(|(_, c)| !sized(c))
+            .filter_map(|(i, c)| {
+                let name = c.get("name")?.as_str()?;
+                let (_, p) = patterns.iter().find(|(n, _)| n.as_deref() == Some(name))?;
+                Some((Some(i), p.clone()))
+            })
+            .collect(),
     };
-    let flag = format!("data.photos {pattern}: the image size of {name}");
-    eprintln!("image size {w}×{h} px, from {name}");
-    set_cameras(doc, "width", Value::Integer(w.into()), &flag)?;
-    set_cameras(doc, "height", Value::Integer(h.into()), &flag)
+    let base = doc.base();
+    for (index, pattern) in wanted {
+        let names = crate::app::photos::list::matching(&base, &pattern)?;
+        let Some((name, (w, h))) = names.iter().find_map(|n| {
+            let size = image::image_dimensions(base.join(n)).ok()?;
+            Some((n, size))
+        }) else {
+            anyhow::bail!(
+                "data.photos {pattern}: none of the {} files is an image",
+                names.len()
+            );
+        };
+        let flag = format!("data.photos {pattern}: the image size of {name}");
+        let camera = index.and_then(|i| {
+            doc.cameras()
+                .get(i)?
+                .get("name")?
+                .as_str()
+                .map(str::to_string)
+        });
+        match &camera {
+            Some(c) => eprintln!("image size {w}×{h} px for camera {c}, from {name}"),
+            None => eprintln!("image size {w}×{h} px, from {name}"),
+        }
+        for (key, value) in [("width", w), ("height", h)] {
+            let path = KeyPath::Camera {
+                index,
+                key: key.into(),
+            };
+            doc.set(&path, Value::Integer(value.into()), &flag)?;
+        }
+    }
+    Ok(())
 }
 
 /// With a video and one camera without an image size, the size is the video's.

@@ -306,6 +306,42 @@ impl Document {
         Ok(())
     }
 
+    /// Makes the cameras one per name, each a copy of the document's only camera
+    /// (the one the flags made for every camera, or none), so that what was given
+    /// for every camera holds for each; `flag` names where the names came from.
+    pub fn cameras_named(&mut self, names: &[String], flag: &str) {
+        let template = self
+            .cameras()
+            .first()
+            .map(|t| (*t).clone())
+            .unwrap_or_default();
+        let template_flags: Vec<(String, String)> = self
+            .flags
+            .iter()
+            .filter(|((s, i, key), _)| s == CAMERAS && *i == 0 && !key.is_empty() && key != "name")
+            .map(|((_, _, key), f)| (key.clone(), f.clone()))
+            .collect();
+        self.flags.retain(|(s, ..), _| s != CAMERAS);
+        let cameras = names
+            .iter()
+            .enumerate()
+            .map(|(i, name)| {
+                let mut camera = template.clone();
+                camera.insert("name".into(), Value::String(name.clone()));
+                self.flags
+                    .insert((CAMERAS.into(), i, String::new()), flag.into());
+                self.flags
+                    .insert((CAMERAS.into(), i, "name".into()), flag.into());
+                for (key, f) in &template_flags {
+                    self.flags
+                        .insert((CAMERAS.into(), i, key.clone()), f.clone());
+                }
+                Value::Table(camera)
+            })
+            .collect();
+        self.table.insert(CAMERAS.into(), Value::Array(cameras));
+    }
+
     /// The checked config. Without overrides the file is parsed as it is, so every
     /// message is exactly [`Config::load`]'s.
     pub fn config(&self) -> Result<Config, OverrideError> {
