@@ -16,6 +16,32 @@ pub const MAX_CONFIG_BYTES: u64 = 1 << 20;
 /// 4 GiB, about 100 million observations.
 pub const MAX_DATA_BYTES: u64 = 4 << 30;
 
+/// `path` with each `dir/..` taken out where `dir` is a real directory (not a
+/// link, whose `..` is its target's parent): the same place, as a user would
+/// write it (`configs/../out/a` is `out/a`).
+pub fn tidy_path(path: &Path) -> PathBuf {
+    use std::path::Component;
+    let mut out = PathBuf::new();
+    for part in path.components() {
+        let is_real_dir =
+            |p: &Path| std::fs::symlink_metadata(p).is_ok_and(|m| m.file_type().is_dir());
+        match part {
+            Component::ParentDir
+                if matches!(out.components().next_back(), Some(Component::Normal(_)))
+                    && is_real_dir(&out) =>
+            {
+                out.pop();
+            }
+            Component::CurDir if !out.as_os_str().is_empty() => {}
+            other => out.push(other),
+        }
+    }
+    if out.as_os_str().is_empty() {
+        out.push(".");
+    }
+    out
+}
+
 /// Reads a regular file of at most `limit` bytes; anything else (a FIFO, a device,
 /// a directory, a larger file) is refused before reading, so a read always ends.
 pub fn read_limited(path: &Path, limit: u64) -> Result<Vec<u8>> {
@@ -630,5 +656,33 @@ impl Drop for OutputSet {
             drop(staging);
             untrack(&path);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::tidy_path;
+    use std::path::Path;
+
+    #[test]
+    fn tidy_paths_name_the_same_place() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        std::fs::create_dir_all(d.join("configs")).unwrap();
+        std::fs::create_dir_all(d.join("elsewhere/inner")).unwrap();
+        std::os::unix::fs::symlink(d.join("elsewhere/inner"), d.join("linked")).unwrap();
+        let tidy = tidy_path(&d.join("configs/../out/t2"));
+        assert_eq!(tidy, d.join("out/t2"));
+        // Through a link `..` is the target's parent, so it stays, and the
+        // kernel's answer is the same for both spellings.
+        let through_link = d.join("linked/../out");
+        assert_eq!(tidy_path(&through_link), through_link);
+        std::fs::create_dir_all(d.join("elsewhere/out")).unwrap();
+        assert_eq!(
+            through_link.canonicalize().unwrap(),
+            d.join("elsewhere/out").canonicalize().unwrap()
+        );
+        assert_eq!(tidy_path(Path::new("./x")), Path::new("./x"));
+        assert_eq!(tidy_path(Path::new("../x")), Path::new("../x"));
     }
 }

@@ -48,10 +48,10 @@ impl Checker<'_> {
                 cameras.len()
             )));
         }
-        let output_dir = match raw.output {
+        let output_dir = crate::app::fsio::tidy_path(&match raw.output {
             Some(o) => self.base.join(o.dir),
             None => self.base.join("out"),
-        };
+        });
         Ok(Config {
             path: self.path.into(),
             target,
