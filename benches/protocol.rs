@@ -143,18 +143,27 @@ fn main() {
 
 /// `PHASES=n`: the thread CPU of each part of the protocol's work over the
 /// first `n` subsets, done one after another as a task does them, and of the
-/// reference calibration's parts (its stages' solve time, its board's σ).
+/// reference calibration's parts (its stages' solve time, its covariance pass with the board's σ).
 fn phases(setup: &Setup, n: usize) {
     let reference = setup.reference().expect("reference");
     let solves: f64 = reference.stages.iter().map(|s| s.seconds).sum();
+    // Its covariance pass again (the calibration already holds it): Σ_θ and
+    // the board's σ, the Jacobian evaluated once for both.
+    let c = thread_cpu_seconds();
+    let pass = deformcal::solver::uncertainty::unit_covariance(reference);
+    let pass_cpu = thread_cpu_seconds() - c;
+    assert!(
+        pass.as_ref().ok() == reference.covariance.as_ref().ok(),
+        "the covariance pass depends on when it runs"
+    );
     let c = thread_cpu_seconds();
     let board = deformcal::app::board_json::of(reference);
     println!(
-        "reference: {} stages, {} observations rejected; its solves {solves:.2} s wall, its board's σ {:.2} s CPU ({})",
+        "reference: {} stages, {} observations rejected; its solves {solves:.2} s wall, its covariance pass (Σ_θ and the board's σ) {pass_cpu:.2} s CPU, board.json from it {:.4} s CPU (σ {})",
         reference.stages.len(),
         reference.rejected.len(),
         thread_cpu_seconds() - c,
-        if board.is_some_and(|b| b.correction_std.is_some()) { "computed" } else { "none" }
+        if board.is_some_and(|b| b.correction_std.is_some()) { "present" } else { "none" }
     );
     let test = TestError::new(reference, 0, &setup.settings).expect("refit");
     let cam = &setup.header.cameras[0];

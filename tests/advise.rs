@@ -134,7 +134,7 @@ fn advised_pose_fills_the_empty_corner_and_helps_as_predicted() {
     let kn = knowledge(&c);
 
     // The summed view information is the solver's covariance (standard method).
-    let unit = &c.covariance.as_ref().unwrap()[0].unit;
+    let unit = &c.covariance.as_ref().unwrap().cameras[0].unit;
     let solver = camera_uncertainty(&kn.intrinsics, &kn.free, &(unit * NOISE * NOISE), W, H)
         .unwrap()
         .expected_mapping_error_px;

@@ -6,8 +6,9 @@
 //! relative (the intrinsics' Σ to 1e-8), for several lens models (a fisheye among them), `static` and
 //! `full`, a stereo rig and a lens prior.
 use crate::common;
+use deformcal::app::board_json;
 use deformcal::model::synthetic::{Generator, Preset};
-use deformcal::solver::covariance::{jacobian, unit_correction_information, unit_correction_std};
+use deformcal::solver::covariance::{jacobian, unit_correction_information};
 use deformcal::solver::problem::{Loss, SolverSettings};
 use deformcal::{Calibration, Dataset, LensModel, Method};
 use nalgebra::{DMatrix, DVector};
@@ -81,7 +82,7 @@ fn check_intrinsics(label: &str, c: &Calibration, r: &Dense) -> f64 {
     let layout = c.problem().layout();
     let unit = c.covariance.as_ref().expect("a covariance");
     let mut worst: f64 = 0.0;
-    for (cam, cov) in unit.iter().enumerate() {
+    for (cam, cov) in unit.cameras.iter().enumerate() {
         let offset = layout.intrinsics_offsets[cam];
         let cols: Vec<(usize, usize)> = (0..cov.unit.nrows())
             .filter_map(|i| Some((i, r.params.iter().position(|&p| p == offset + i)?)))
@@ -108,11 +109,18 @@ fn check_intrinsics(label: &str, c: &Calibration, r: &Dense) -> f64 {
     worst
 }
 
-/// The board's σ against √diag of the dense Σ, and the corrections' marginal
-/// information against the inverse of their block of the dense H⁻¹.
+/// The board's σ that the calibration's covariance pass gave beside Σ_θ
+/// against √diag of the dense Σ, `board.json`'s σ against it scaled by the
+/// noise, and the corrections' marginal information against the inverse of
+/// their block of the dense H⁻¹.
 fn check_board(label: &str, c: &Calibration, r: &Dense) -> (f64, f64) {
     let layout = c.problem().layout();
-    let std = unit_correction_std(&c.problem(), &c.state, &c.settings).expect("kept corrections");
+    let cov = c.covariance.as_ref().expect("a covariance");
+    let std = cov.correction_std.as_ref().expect("kept corrections");
+    let noise = c.assessment.trust.expect("a noise estimate").noise_px;
+    let written = board_json::of(c).and_then(|b| b.correction_std);
+    let scaled: Vec<[f64; 3]> = std.iter().map(|s| s.map(|v| v * noise)).collect();
+    assert_eq!(written, Some(scaled), "{label}: board.json's σ");
     let mut worst: f64 = 0.0;
     let mut free = 0;
     for (corner, values) in std.iter().enumerate() {
@@ -232,7 +240,12 @@ fn board_sigma_and_covariance_match_the_dense_inverse() {
             let (board, info) = check_board(label, &c, &r);
             eprintln!("{label}: intrinsics {intrinsics:.1e}, board's σ {board:.1e}, information {info:.1e}");
         } else {
-            assert!(unit_correction_std(&c.problem(), &c.state, &c.settings).is_err());
+            let cov = c.covariance.as_ref().expect("a covariance");
+            assert!(cov.correction_std.is_none(), "{label}");
+            assert!(
+                board_json::of(&c).unwrap().correction_std.is_none(),
+                "{label}"
+            );
             eprintln!("{label}: intrinsics {intrinsics:.1e}");
         }
     }

@@ -156,8 +156,8 @@ fn intrinsics_covariance_does_not_depend_on_the_gauge() {
     ] {
         let (ca, cb) = (with_gauge(&d, method, &a), with_gauge(&d, method, &b));
         let (sa, sb) = (
-            &ca.covariance.as_ref().unwrap()[0].unit,
-            &cb.covariance.as_ref().unwrap()[0].unit,
+            &ca.covariance.as_ref().unwrap().cameras[0].unit,
+            &cb.covariance.as_ref().unwrap().cameras[0].unit,
         );
         let mut worst: f64 = 0.0;
         for i in 0..sa.nrows() {
@@ -202,30 +202,30 @@ fn without_the_gauge_the_covariance_is_refused() {
 }
 
 #[test]
-fn board_json_takes_the_corrections_sigma_only_where_the_normal_matrix_keeps_them() {
-    // board.json skips building the normal matrix again when the calibration's
-    // covariance says it eliminated the corrections (25 images): computing it
-    // afresh then gives nothing either. With 100 images it keeps them, and
-    // board.json's σ is the afresh computation's, bit for bit.
+fn board_json_takes_the_corrections_sigma_from_the_covariance_pass() {
+    // The calibration's covariance pass gives the board's σ beside Σ_θ where
+    // its normal matrix keeps the corrections (100 images) and none where it
+    // eliminates them (25 images); board.json reads it, scaled by the noise,
+    // and the pass run again on the finished calibration gives the same bits.
+    // tests/covariance_dense.rs checks the σ against a dense H⁻¹GH⁻¹.
     use deformcal::app::board_json;
-    use deformcal::solver::covariance::unit_correction_std;
+    use deformcal::solver::uncertainty::unit_covariance;
     for (images, kept) in [(25, false), (100, true)] {
         let (d, _) = common::data(Preset::T2, images, 34, 1.0, 1.0);
         let c = common::run(&d, Method::Static, deformcal::solver::problem::Loss::Cauchy);
         let cov = c.covariance.as_ref().unwrap();
-        assert_eq!(cov[0].corrections_kept, kept, "{images} images");
-        let fresh = unit_correction_std(&c.problem(), &c.state, &c.settings);
+        assert_eq!(cov.correction_std.is_some(), kept, "{images} images");
+        assert_eq!(&unit_covariance(&c).unwrap(), cov, "{images} images");
         let written = board_json::of(&c).unwrap().correction_std;
-        match (fresh, written) {
-            (Err(_), None) => assert!(!kept),
-            (Ok(unit), Some(std)) => {
-                assert!(kept);
+        match (&cov.correction_std, written) {
+            (None, None) => assert!(!kept),
+            (Some(unit), Some(std)) => {
                 let noise = c.assessment.trust.unwrap().noise_px;
                 let expected: Vec<[f64; 3]> = unit.iter().map(|s| s.map(|v| v * noise)).collect();
                 assert_eq!(std, expected);
                 assert!(std.iter().flatten().any(|&v| v > 0.0));
             }
-            (fresh, written) => panic!("{images} images: {fresh:?} against {written:?}"),
+            (unit, written) => panic!("{images} images: {unit:?} against {written:?}"),
         }
     }
 }

@@ -588,7 +588,7 @@ fn colour(t: f64) -> String {
 /// noise; nothing is solved again) and its noise estimate; `None` when the
 /// calibration has no covariance or no noise estimate.
 pub fn knowledge_of(c: &crate::solver::calibrate::Calibration, k: usize) -> Option<Knowledge> {
-    let cov = c.covariance.as_ref().ok()?.get(k)?;
+    let cov = c.covariance.as_ref().ok()?.cameras.get(k)?;
     let noise_px = c.assessment.trust.as_ref()?.noise_px;
     let idx = free_indices(&cov.free);
     let block = DMatrix::from_fn(idx.len(), idx.len(), |a, b| cov.unit[(idx[a], idx[b])]);

@@ -61,20 +61,18 @@ pub fn of(c: &Calibration) -> Option<BoardJson> {
             [g[0] + d[0], g[1] + d[1], g[2] + d[2]]
         })
         .collect();
+    // The σ at unit noise came out of the calibration's covariance pass, with
+    // its intrinsics' Σ_θ (none when that pass eliminated the corrections, as
+    // with 25 images): nothing is evaluated again here.
     let noise = c.assessment.trust.map(|t| t.noise_px);
-    // The calibration's own covariance says whether its normal matrix kept the
-    // corrections: when it eliminated them (fewer values in the images' blocks,
-    // as with 25 images), building that matrix again here gives nothing.
-    let eliminated = c
+    let unit = c
         .covariance
         .as_ref()
-        .is_ok_and(|cov| cov.first().is_some_and(|k| !k.corrections_kept));
-    let correction_std = noise.filter(|_| !eliminated).and_then(|noise| {
-        let unit =
-            crate::solver::covariance::unit_correction_std(&c.problem(), &c.state, &c.settings)
-                .ok()?;
-        Some(unit.iter().map(|s| s.map(|v| v * noise)).collect())
-    });
+        .ok()
+        .and_then(|cov| cov.correction_std.as_ref());
+    let correction_std = noise
+        .zip(unit)
+        .map(|(noise, unit)| unit.iter().map(|s| s.map(|v| v * noise)).collect());
     Some(BoardJson {
         format: FORMAT.into(),
         version: 1,

@@ -38,10 +38,20 @@ pub struct IntrinsicsCovariance {
     pub free: Vec<bool>,
     /// n × n over the lens parameters, in their units squared per px².
     pub unit: DMatrix<f64>,
-    /// Whether the board's static corrections stayed in the dense reduced
-    /// system this was computed with (then that system gives their σ too); false
-    /// when they were eliminated first or the problem has none free.
-    pub corrections_kept: bool,
+}
+
+/// What one covariance pass over a solved problem gives at unit noise: every
+/// camera's Σ_θ and, from the same Jacobian and normal matrix, the board's σ.
+#[derive(Debug, Clone, PartialEq)]
+pub struct UnitCovariance {
+    /// Σ_θ of each camera, in the dataset's order.
+    pub cameras: Vec<IntrinsicsCovariance>,
+    /// The standard deviation of every static correction value (3 per corner,
+    /// metres per px; 0 for a held value): present when the board's
+    /// corrections stayed in the dense reduced system, absent when they were
+    /// eliminated first (fewer values in the images' blocks than in the
+    /// corners', as with 25 images) or the problem has none free.
+    pub correction_std: Option<Vec<[f64; 3]>>,
 }
 
 /// A camera's uncertainty figures at a given noise (docs/conventions.md §3a, §5).

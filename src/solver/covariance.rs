@@ -4,7 +4,9 @@
 //!
 //! The gauge is fixed by the parameterisation: held corners have no Jacobian
 //! column, so JᵀJ is regular for a well-posed problem and is inverted as it is,
-//! never pseudo-inverted. For Σ_θ and the corrections' standard deviations the
+//! never pseudo-inverted. Σ_θ and the board's σ come out of one pass
+//! ([`unit_covariance`]), so that the Jacobian at the optimum (at 650 images
+//! a third of the board's σ) and H are computed once per calibration. For both, the
 //! per-image blocks (pose, bend) or the per-corner corrections, whichever leaves
 //! fewer parameters, are eliminated by a Schur complement, as Ceres' solver
 //! does; for the corrections' marginal information the per-image blocks are.
@@ -15,17 +17,17 @@
 //! H⁻¹JᵀW·noise and Σ_θ = σ̂² [H⁻¹ (JᵀW²J) H⁻¹]_θθ; without a loss (W = I) this is
 //! σ̂² [(JᵀJ)⁻¹]_θθ, and a uniform weight cancels.
 use crate::model::state::Layout;
-use crate::model::uncertainty::{IntrinsicsCovariance, UncertaintyError};
+use crate::model::uncertainty::{IntrinsicsCovariance, UncertaintyError, UnitCovariance};
 use crate::solver::problem::{Evaluation, Problem, SolverSettings, State};
 use nalgebra::DMatrix;
 use normal::{
-    add_lens_prior, backward, check_shape, cholesky, corrections_kept, describe, dot, eliminate,
-    forward, jacobi_scale, loss_weights, normal_matrix, schur, Eliminate, Normal, Role,
+    add_lens_prior, backward, check_shape, cholesky, column_scales, describe, dot, eliminate,
+    forward, jacobi_scale, jacobi_scales, keeps_corrections, loss_weights, normal_matrices,
+    normal_matrix, scale_normal, schur, Eliminate, Normal, Role,
 };
 
 mod board_std;
 mod normal;
-pub use board_std::unit_correction_std;
 pub use normal::jacobian;
 
 /// X = H⁻¹ E for the unit vectors E of the `targets` columns (all kept): one
@@ -72,20 +74,8 @@ fn solve_columns(n: &Normal, scale: &[f64], targets: &[usize]) -> Vec<f64> {
     x
 }
 
-/// The Jacobian at `state`, the loss's weights and H = JᵀWJ with the lens
-/// prior's information: what every covariance here starts from.
-fn weighted_normal(
-    problem: &Problem,
-    state: &State,
-    settings: &SolverSettings,
-    eliminate: Eliminate,
-) -> Result<(Evaluation, Vec<f64>, Normal), UncertaintyError> {
-    let e = jacobian(problem, state, settings)?;
-    let (weights, n) = weighted_normal_of(&e, problem, settings, eliminate)?;
-    Ok((e, weights, n))
-}
-
-/// [`weighted_normal`] from a Jacobian already evaluated.
+/// The loss's weights and H = JᵀWJ with the lens prior's information, from the
+/// Jacobian at the optimum: what the corrections' information starts from.
 fn weighted_normal_of(
     e: &Evaluation,
     problem: &Problem,
@@ -100,26 +90,53 @@ fn weighted_normal_of(
 }
 
 /// Σ_θ of every camera at unit noise, from the Jacobian of `problem` at `state`
-/// (its optimum) with the loss of `settings`.
+/// (its optimum) with the loss of `settings`, and the board's σ when the
+/// normal matrix keeps the static corrections. One pass: the Jacobian, the
+/// loss weights, H and its Jacobi scaling, Schur complement and Cholesky
+/// factor serve both. The Jacobian (at 10 000 images, 1.7 million
+/// observations) is freed before the board's part allocates its matrices, and
+/// nothing of the pass but its results is kept.
 pub fn unit_covariance(
     problem: &Problem,
     state: &State,
     settings: &SolverSettings,
-) -> Result<Vec<IntrinsicsCovariance>, UncertaintyError> {
+) -> Result<UnitCovariance, UncertaintyError> {
     let d = problem.dataset;
     let layout = problem.layout();
-    let (e, weights, mut n) = weighted_normal(problem, state, settings, Eliminate::Smaller)?;
-    let scale = jacobi_scale(d, &layout, &mut n)?;
-    eliminate(d, &layout, &mut n)?;
-    let targets: Vec<usize> = (0..n.params.len())
-        .filter(|&col| n.params[col] < layout.intrinsics_len())
+    let e = jacobian(problem, state, settings)?;
+    check_shape(&e, problem)?;
+    let weights = loss_weights(d, settings, &e.residuals);
+    // The board's noise term G = JᵀW²J is built beside H, in the same pass over
+    // the Jacobian's rows, only when the corrections stay in the dense system.
+    let (mut h, mut g) = if keeps_corrections(&e, &layout) {
+        let squared: Vec<f64> = weights.iter().map(|w| w * w).collect();
+        let [h, g] = normal_matrices(&e, &layout, [&weights, &squared], Eliminate::Smaller)?;
+        (h, Some(g))
+    } else {
+        let [h] = normal_matrices(&e, &layout, [&weights], Eliminate::Smaller)?;
+        (h, None)
+    };
+    add_lens_prior(&mut h, &problem.lens_prior_weights(settings));
+    // G is scaled by H's scales D: (DHD)⁻¹ (DGD) (DHD)⁻¹ = D⁻¹ Σ D⁻¹.
+    let (kept, eliminated) = jacobi_scales(d, &layout, &h)?;
+    scale_normal(&mut h, &kept, &eliminated);
+    if let Some(g) = g.as_mut() {
+        scale_normal(g, &kept, &eliminated);
+    }
+    let scale = column_scales(&h, &kept, &eliminated);
+    eliminate(d, &layout, &mut h)?;
+    let targets: Vec<usize> = (0..h.params.len())
+        .filter(|&col| h.params[col] < layout.intrinsics_len())
         .collect();
-    let x = solve_columns(&n, &scale, &targets);
+    let x = solve_columns(&h, &scale, &targets);
     let sigma = sandwich(&e, &weights, &x, targets.len());
-    let mut out = per_camera(&layout, &n.params, &targets, &sigma);
-    let kept = corrections_kept(&n, &layout);
-    out.iter_mut().for_each(|c| c.corrections_kept = kept);
-    Ok(out)
+    drop(e);
+    let cameras = per_camera(&layout, &h.params, &targets, &sigma);
+    let correction_std = g.map(|g| board_std::correction_std(d, &layout, &h, g, &kept));
+    Ok(UnitCovariance {
+        cameras,
+        correction_std,
+    })
 }
 
 /// (WJX)ᵀ(WJX), t × t, with X given per Jacobian column (t values each): the
@@ -157,7 +174,6 @@ fn per_camera(
             let mut cov = IntrinsicsCovariance {
                 free: vec![false; np],
                 unit: DMatrix::zeros(np, np),
-                corrections_kept: false,
             };
             let local = |u: usize| params[targets[u]].checked_sub(offset).filter(|&i| i < np);
             for a in 0..targets.len() {

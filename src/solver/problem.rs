@@ -179,6 +179,13 @@ impl SolverSettings {
     }
 }
 
+#[cfg(test)]
+thread_local! {
+    /// Jacobians evaluated through the bridge on this thread ([`Problem::jacobian`]),
+    /// so that a test can see what a step evaluates (per thread: tests run in parallel).
+    pub(crate) static JACOBIANS: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+}
+
 /// One calibration problem: data, method, gauge and what is held fixed.
 #[derive(Debug, Clone)]
 pub struct Problem<'a> {
@@ -559,6 +566,8 @@ impl Problem<'_> {
     /// observation order (two per observation), and the residuals in pixels (weights
     /// undone). The same numbers as [`Problem::evaluate`]'s, several times faster; `cost` is NaN.
     pub fn jacobian(&self, state: &State, settings: &SolverSettings) -> Result<Evaluation> {
+        #[cfg(test)]
+        JACOBIANS.with(|n| n.set(n.get() + 1));
         let data = self.data(state, &self.layout(), settings)?;
         let j = ffi::jacobian(&data, &settings.options())
             .map_err(|e| Error::Problem(e.what().to_string()))?;

@@ -4,14 +4,15 @@
 //! `model::uncertainty` derives from it.
 use crate::model::trust::Trust;
 use crate::model::uncertainty::{
-    camera_uncertainty, CameraUncertainty, IntrinsicsCovariance, UncertaintyError,
+    camera_uncertainty, CameraUncertainty, UncertaintyError, UnitCovariance,
 };
 use crate::solver::calibrate::Calibration;
 use nalgebra::DMatrix;
 
-/// Σ_θ of every camera of `c` at unit noise, from the Jacobian at its optimum
-/// (what [`Calibration::covariance`] holds).
-pub fn unit_covariance(c: &Calibration) -> Result<Vec<IntrinsicsCovariance>, UncertaintyError> {
+/// Σ_θ of every camera of `c` at unit noise, from the Jacobian at its optimum,
+/// and the board's σ where the normal matrix keeps the corrections (what
+/// [`Calibration::covariance`] holds).
+pub fn unit_covariance(c: &Calibration) -> Result<UnitCovariance, UncertaintyError> {
     crate::solver::covariance::unit_covariance(&c.problem(), &c.state, &c.settings)
 }
 
@@ -24,7 +25,11 @@ impl Calibration {
     ) -> Result<Vec<DMatrix<f64>>, UncertaintyError> {
         let noise = trust.ok_or(UncertaintyError::NoNoise)?.noise_px;
         let unit = self.covariance.as_ref().map_err(Clone::clone)?;
-        Ok(unit.iter().map(|c| &c.unit * (noise * noise)).collect())
+        Ok(unit
+            .cameras
+            .iter()
+            .map(|c| &c.unit * (noise * noise))
+            .collect())
     }
 
     /// Every camera's uncertainty figures (docs/conventions.md §3a) at the noise
@@ -37,7 +42,7 @@ impl Calibration {
         let unit = self.covariance.as_ref().map_err(Clone::clone)?;
         let cameras = self.dataset.cameras.iter().zip(&self.state.intrinsics);
         cameras
-            .zip(unit.iter().zip(&sigma))
+            .zip(unit.cameras.iter().zip(&sigma))
             .map(|((cam, k), (cov, sigma))| {
                 camera_uncertainty(k, &cov.free, sigma, cam.width, cam.height).ok_or_else(|| {
                     UncertaintyError::Jacobian(format!(

@@ -13,7 +13,7 @@ use crate::model::metrics::{grid_rays, mapping_error_of, mapping_error_rot_of};
 use crate::model::selection::AutoSettings;
 use crate::model::synthetic::Truth;
 use crate::model::uncertainty::CameraUncertainty;
-use crate::solver::calibrate::{fit, Calibration, Request, SharedWarmStart};
+use crate::solver::calibrate::{calibrate, Calibration, Request, SharedWarmStart};
 use crate::solver::problem::SolverSettings;
 use crate::solver::select::calibrate_auto_sharing;
 use rayon::prelude::*;
@@ -97,9 +97,10 @@ impl Setup {
     }
 
     /// The reference set's `static` calibration (none without a reference set),
-    /// with the settings of every task. Without its covariance: the rows use its
-    /// parameters and its board, never its uncertainty, and on 650 images the
-    /// covariance is a large part of its cost.
+    /// with the settings of every task, and its covariance: the rows use its
+    /// parameters and its board, never its uncertainty, but its board's σ comes
+    /// out of the covariance pass, and beside the σ the intrinsics' Σ_θ costs
+    /// little (the Jacobian, H and its factor are the σ's too).
     fn reference_calibration(&self) -> Result<Option<Calibration>> {
         let Some(ref_data) = &self.reference_data else {
             return Ok(None);
@@ -109,12 +110,14 @@ impl Setup {
             settings: self.settings.clone(),
             gauge: None,
         };
-        fit(ref_data, &request).map(Some).map_err(|e| match e {
-            Error::Degenerate(m) | Error::Init(m) | Error::Solver(m) => {
-                Error::Degenerate(format!("the reference calibration failed: {m}"))
-            }
-            other => other,
-        })
+        calibrate(ref_data, &request)
+            .map(Some)
+            .map_err(|e| match e {
+                Error::Degenerate(m) | Error::Init(m) | Error::Solver(m) => {
+                    Error::Degenerate(format!("the reference calibration failed: {m}"))
+                }
+                other => other,
+            })
     }
 
     /// The reference calibration and what the rows are measured against with it.

@@ -1,4 +1,5 @@
-//! The pipeline's own unit tests: the second start and the shared warm start.
+//! The pipeline's own unit tests: the second start, the shared warm start and
+//! the covariance pass's one Jacobian.
 use super::init::initialise;
 use super::warm::from_second_start;
 use super::*;
@@ -393,4 +394,32 @@ fn same_fit(a: &Calibration, b: &Calibration, what: &str) {
     let iterations = |c: &Calibration| c.stages.iter().map(|s| s.iterations).collect::<Vec<_>>();
     assert_eq!(iterations(a), iterations(b), "{what}");
     assert_eq!(a.converged, b.converged, "{what}");
+}
+
+/// A calibration whose normal matrix keeps the corrections (`static`, 100
+/// images) evaluates the Jacobian at its optimum once after its fit: its
+/// covariance pass gives Σ_θ and the board's σ, and `board.json` reads the σ
+/// without evaluating anything. Its σ is that pass's, bit for bit, scaled by
+/// the noise; with 25 images the pass eliminates the corrections and there is none.
+#[test]
+fn the_covariance_pass_evaluates_the_jacobian_once_for_the_intrinsics_and_the_board() {
+    use crate::solver::problem::JACOBIANS;
+    for (images, kept) in [(100, true), (25, false)] {
+        let (dataset, _) = Generator::new(Preset::T2, Some(images), 34).generate();
+        let request = Request {
+            method: Method::Static,
+            settings: SolverSettings::default(),
+            gauge: None,
+        };
+        let fitted = fit(&dataset, &request).unwrap();
+        let before = JACOBIANS.with(|n| n.get());
+        let c = with_covariance(fitted).unwrap();
+        let board = crate::app::board_json::of(&c).unwrap();
+        assert_eq!(JACOBIANS.with(|n| n.get()) - before, 1, "{images} images");
+        let unit = c.covariance.as_ref().unwrap().correction_std.clone();
+        assert_eq!(unit.is_some(), kept, "{images} images");
+        let noise = c.assessment.trust.unwrap().noise_px;
+        let scaled = unit.map(|u| u.iter().map(|s| s.map(|v| v * noise)).collect::<Vec<_>>());
+        assert_eq!(board.correction_std, scaled, "{images} images");
+    }
 }

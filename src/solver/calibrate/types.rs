@@ -6,7 +6,7 @@ use crate::model::dataset::Dataset;
 use crate::model::lens::Intrinsics;
 use crate::model::selection::Selection;
 use crate::model::trust::Trust;
-use crate::model::uncertainty::{CameraUncertainty, IntrinsicsCovariance, UncertaintyError};
+use crate::model::uncertainty::{CameraUncertainty, UncertaintyError, UnitCovariance};
 use crate::solver::problem::{Hold, Problem, SolveReport, SolverSettings, State};
 
 /// What the user asks of one calibration.
@@ -74,8 +74,10 @@ pub struct Calibration {
     pub detector_noise_px: Option<f64>,
     /// With `method = "auto"`: why this method was chosen, and every candidate's figures.
     pub selection: Option<Selection>,
-    /// Σ_θ of each camera at unit noise (see `solver::uncertainty`), or why there is none.
-    pub covariance: std::result::Result<Vec<IntrinsicsCovariance>, UncertaintyError>,
+    /// Σ_θ of each camera at unit noise (see `solver::uncertainty`) and, when
+    /// the corrections stayed in the normal matrix, the board's σ from the same
+    /// pass (what `board.json` reads), or why there is none.
+    pub covariance: std::result::Result<UnitCovariance, UncertaintyError>,
     /// The trust and uncertainty figures every writer reports, computed once when
     /// the calibration is done ([`Calibration::assess`]).
     pub assessment: Assessment,

@@ -1,58 +1,38 @@
 //! The board's σ for `board.json`: the marginal standard deviation of every
 //! static correction value at unit noise, the diagonal of the corrections'
-//! block of H⁻¹ (JᵀW²J) H⁻¹. Structured, so that it costs a few dense matrix
-//! products over the intrinsics and corrections whatever the number of images:
-//! the per-image blocks (pose, bend), which couple the rest only through their
-//! few values, are eliminated frame by frame from H and from the noise term
-//! alike, one Cholesky factor of what is left gives its inverse, and only the
-//! diagonal of the product is read. The normal matrices and their
+//! block of H⁻¹ (JᵀW²J) H⁻¹. Part of the covariance pass (`unit_covariance`),
+//! which hands over H already reduced and factored, so that the Jacobian, the
+//! loss weights, H, its Jacobi scaling, its Schur complement and its Cholesky
+//! factor serve Σ_θ and the board alike. Structured, so that it costs a few
+//! dense matrix products over the intrinsics and corrections whatever the
+//! number of images: the per-image blocks (pose, bend), which couple the rest
+//! only through their few values, are eliminated frame by frame from H and
+//! from the noise term alike, the factor of what is left gives its inverse,
+//! and only the diagonal of the product is read. The normal matrices and their
 //! factorisations are `normal`'s.
-use super::normal::{
-    add_lens_prior, backward, check_shape, cholesky, corrections_kept, describe, dot,
-    jacobi_scales, jacobian, loss_weights, normal_matrices, scale_normal, schur, Eliminate, Normal,
-};
-use crate::model::state::CORRECTION_STRIDE;
-use crate::model::uncertainty::UncertaintyError;
-use crate::solver::problem::{Problem, SolverSettings, State};
+use super::normal::{backward, dot, Normal};
+use crate::model::dataset::Dataset;
+use crate::model::state::{Layout, CORRECTION_STRIDE};
 use nalgebra::DMatrix;
 
 /// The standard deviation of every static correction value at unit noise (3 per
-/// corner; 0 for a held value), with the loss of `settings` as
-/// `unit_covariance` takes it; `Err` when the problem has no free
-/// correction or when the corrections are the eliminated blocks (fewer values
-/// in the images' blocks than in the corners', so a dataset too small to
-/// measure a board anyway).
-pub fn unit_correction_std(
-    problem: &Problem,
-    state: &State,
-    settings: &SolverSettings,
-) -> Result<Vec<[f64; 3]>, UncertaintyError> {
-    let d = problem.dataset;
-    let layout = problem.layout();
-    let e = jacobian(problem, state, settings)?;
-    check_shape(&e, problem)?;
-    let weights = loss_weights(d, settings, &e.residuals);
-    let squared: Vec<f64> = weights.iter().map(|w| w * w).collect();
-    // H = JᵀWJ (with the lens prior, the curvature the fit solves with) and the
-    // noise term G = JᵀW²J, in one pass over the Jacobian.
-    let [mut h, mut g] = normal_matrices(&e, &layout, [&weights, &squared], Eliminate::Smaller)?;
-    add_lens_prior(&mut h, &problem.lens_prior_weights(settings));
-    if !corrections_kept(&h, &layout) {
-        return Err(UncertaintyError::Jacobian(
-            "the corrections are not determined well enough for a covariance".into(),
-        ));
-    }
-    // Both scaled by H's Jacobi scales D: (DHD)⁻¹ (DGD) (DHD)⁻¹ = D⁻¹ Σ D⁻¹.
-    let (kept, eliminated) = jacobi_scales(d, &layout, &h)?;
-    scale_normal(&mut h, &kept, &eliminated);
-    scale_normal(&mut g, &kept, &eliminated);
-    schur(d, &layout, &mut h)?;
-    let noise = reduced_noise(&h, &g);
-    let m = h.a.nrows();
-    // Symmetric, so the column-major storage reads as row-major.
-    cholesky(h.a.as_mut_slice(), m).map_err(|k| {
-        UncertaintyError::RankDeficient(describe(d, &layout, h.params[h.kept_columns[k]]))
-    })?;
+/// corner; 0 for a held value), with the loss the weights of `h` and `g` hold.
+///
+/// `h` is H = JᵀWJ (with the lens prior, the curvature the fit solves with)
+/// with the per-image blocks as its eliminated ones and the corrections kept,
+/// Jacobi-scaled by D (`kept` holds D's kept values), reduced by [`schur`] and
+/// its Schur complement factored in place; `g` is the noise term G = JᵀW²J
+/// with the same blocks, scaled by the same D: (DHD)⁻¹ (DGD) (DHD)⁻¹ = D⁻¹ Σ D⁻¹.
+///
+/// [`schur`]: super::normal::schur
+pub(super) fn correction_std(
+    d: &Dataset,
+    layout: &Layout,
+    h: &Normal,
+    g: Normal,
+    kept: &[f64],
+) -> Vec<[f64; 3]> {
+    let noise = reduced_noise(h, g);
     let variance = sandwich_diagonal(h.a.as_slice(), &noise);
     let mut out = vec![[0.0; 3]; d.target.num_corners()];
     for (k, &col) in h.kept_columns.iter().enumerate() {
@@ -62,7 +42,7 @@ pub fn unit_correction_std(
         let s = kept[k] * variance[k].max(0.0).sqrt();
         out[i / CORRECTION_STRIDE][i % CORRECTION_STRIDE] = s;
     }
-    Ok(out)
+    out
 }
 
 /// The noise term reduced onto the kept values: with the eliminated values'
@@ -71,14 +51,15 @@ pub fn unit_correction_std(
 /// Ĝ = G_kk − G_kf M − Mᵀ G_fk + Mᵀ G_ff M = G_kk − QᵀM − MᵀQ with
 /// Q = G_fk − ½ G_ff M: one matrix product, QᵀM, over the image blocks.
 ///
-/// `h` has been through [`schur`] (its blocks D factored in place, its Bᵀ turned
-/// into L⁻¹Bᵀ); `g` is the noise term with the same blocks, scaled alike. With
-/// W = I and no prior, G = H and Ĝ is H's Schur complement.
-fn reduced_noise(h: &Normal, g: &Normal) -> DMatrix<f64> {
+/// `h` has been through [`schur`](super::normal::schur) (its blocks D factored
+/// in place, its Bᵀ turned into L⁻¹Bᵀ); `g` is the noise term with the same
+/// blocks, scaled alike, and its Bᵀ becomes Q in place (nothing reads it
+/// after). With W = I and no prior, G = H and Ĝ is H's Schur complement.
+fn reduced_noise(h: &Normal, g: Normal) -> DMatrix<f64> {
     let ne = h.bt.nrows();
     // M = L⁻ᵀ(L⁻¹Bᵀ) and Q, image block by image block.
     let mut m = h.bt.clone();
-    let mut q = g.bt.clone();
+    let mut q = g.bt;
     let columns = m
         .as_mut_slice()
         .chunks_exact_mut(ne)
@@ -94,7 +75,7 @@ fn reduced_noise(h: &Normal, g: &Normal) -> DMatrix<f64> {
         }
     }
     let t = q.transpose() * &m;
-    let mut out = g.a.clone();
+    let mut out = g.a;
     out -= &t;
     out -= t.transpose();
     out

@@ -399,13 +399,18 @@ pub(super) fn jacobi_scale(
 ) -> Result<Vec<f64>, UncertaintyError> {
     let (kept, eliminated) = jacobi_scales(d, layout, n)?;
     scale_normal(n, &kept, &eliminated);
-    Ok(n.roles
+    Ok(column_scales(n, &kept, &eliminated))
+}
+
+/// The scales of the kept and of the eliminated values, per Jacobian column.
+pub(super) fn column_scales(n: &Normal, kept: &[f64], eliminated: &[f64]) -> Vec<f64> {
+    n.roles
         .iter()
         .map(|r| match *r {
             Role::Kept(k) => kept[k],
             Role::Eliminated { index, .. } => eliminated[index],
         })
-        .collect())
+        .collect()
 }
 
 /// The scales 1/√diag of the kept and of the eliminated values that give the
@@ -543,11 +548,15 @@ pub(super) fn check_shape(e: &Evaluation, problem: &Problem) -> Result<(), Uncer
     Ok(())
 }
 
-/// Whether the normal matrix has free static corrections, all of them kept in
-/// its dense system (what [`unit_correction_std`] needs).
-pub(super) fn corrections_kept(n: &Normal, layout: &Layout) -> bool {
+/// Whether a normal matrix built from `e` with [`Eliminate::Smaller`] has
+/// free static corrections, all of them kept in its dense system (what the
+/// board's σ needs): known from the columns alone, before the matrix is built,
+/// so that the pass builds the noise term beside H only when it is wanted.
+pub(super) fn keeps_corrections(e: &Evaluation, layout: &Layout) -> bool {
+    let params: Vec<usize> = e.jacobian_col_param.iter().map(|&p| p as usize).collect();
+    let (roles, _, _) = roles(layout, &params, Eliminate::Smaller);
     let mut any = false;
-    for (&param, role) in n.params.iter().zip(&n.roles) {
+    for (&param, role) in params.iter().zip(&roles) {
         if param >= layout.corrections {
             if !matches!(role, Role::Kept(_)) {
                 return false;
