@@ -258,6 +258,25 @@ fn a_photo_map_makes_one_camera_per_pattern() {
     );
     assert_eq!(one["cameras"][0]["name"], "cam0");
     assert!(assert_same_numbers(&one, &one_full, 1e-12, "calibration") > 50);
+
+    // A key that is no camera name is refused as the map's, in one line (the
+    // sizes read on the way are said only for a config that is accepted).
+    let bad = refused(
+        d,
+        &[
+            "calibrate",
+            "--set",
+            r#"data.photos={ "a/b" = "photos/left*.jpg" }"#,
+            "--board",
+            "9x6",
+            "--square",
+            "0.025",
+        ],
+    );
+    assert!(
+        bad.contains("data.photos") && bad.contains("`a/b`"),
+        "{bad}"
+    );
 }
 
 /// A t2 observations CSV (13×13 board, 1936×1216, known truth) in `dir`.

@@ -192,12 +192,17 @@ pub fn config(args: &CalibrateArgs) -> Result<(Document, Config)> {
         doc.set_assignment(assignment, "--set")?;
     }
     cameras_from_photo_map(&mut doc, file_has_cameras);
-    image_size_from_photos(&mut doc)?;
-    image_size_from_video(&mut doc)?;
+    // Where a size came from is said once the config is accepted, so that a
+    // refused config gives its one error line alone.
+    let mut sizes_read = image_size_from_photos(&mut doc)?;
+    sizes_read.extend(image_size_from_video(&mut doc)?);
     let mut config = match doc.config() {
         Err(e) if doc.file().is_none() => return Err(with_hint(e)),
         other => other?,
     };
+    for line in sizes_read {
+        eprintln!("{line}");
+    }
     // The output folder is no key to check: it is taken as written (relative to
     // the working folder), and the written config names it absolutely.
     if let Some(dir) = &args.output {
@@ -436,15 +441,16 @@ fn cameras_from_photo_map(doc: &mut Document, file_has_cameras: bool) {
 
 /// Cameras without an image size take it from their first photo that has one
 /// (a header read, not a decode): with one photo pattern, every camera (there is
-/// one) from it; with one pattern per camera, each from its own.
-fn image_size_from_photos(doc: &mut Document) -> Result<()> {
+/// one) from it; with one pattern per camera, each from its own. Returns a line
+/// per size read, saying where from.
+fn image_size_from_photos(doc: &mut Document) -> Result<Vec<String>> {
     let patterns: Vec<(Option<String>, String)> = match doc.get("data", "photos") {
         Some(Value::String(p)) => vec![(None, p.clone())],
         Some(Value::Table(map)) => map
             .iter()
             .filter_map(|(name, p)| Some((Some(name.clone()), p.as_str()?.to_string())))
             .collect(),
-        _ => return Ok(()),
+        _ => return Ok(Vec::new()),
     };
     let cameras = doc.cameras();
     let sized = |c: &toml::Table| c.contains_key("width") && c.contains_key("height");
@@ -466,6 +472,7 @@ fn image_size_from_photos(doc: &mut Document) -> Result<()> {
             .collect(),
     };
     let base = doc.base();
+    let mut read = Vec::new();
     for (index, pattern) in wanted {
         let names = crate::app::photos::list::matching(&base, &pattern)?;
         let Some((name, (w, h))) = names.iter().find_map(|n| {
@@ -485,10 +492,10 @@ fn image_size_from_photos(doc: &mut Document) -> Result<()> {
                 .as_str()
                 .map(str::to_string)
         });
-        match &camera {
-            Some(c) => eprintln!("image size {w}×{h} px for camera {c}, from {name}"),
-            None => eprintln!("image size {w}×{h} px, from {name}"),
-        }
+        read.push(match &camera {
+            Some(c) => format!("image size {w}×{h} px for camera {c}, from {name}"),
+            None => format!("image size {w}×{h} px, from {name}"),
+        });
         for (key, value) in [("width", w), ("height", h)] {
             let path = KeyPath::Camera {
                 index,
@@ -497,26 +504,27 @@ fn image_size_from_photos(doc: &mut Document) -> Result<()> {
             doc.set(&path, Value::Integer(value.into()), &flag)?;
         }
     }
-    Ok(())
+    Ok(read)
 }
 
-/// With a video and one camera without an image size, the size is the video's.
-fn image_size_from_video(doc: &mut Document) -> Result<()> {
+/// With a video and one camera without an image size, the size is the video's;
+/// the line saying so, if it was read.
+fn image_size_from_video(doc: &mut Document) -> Result<Option<String>> {
     let Some(video) = doc.get("data", "video").and_then(Value::as_str) else {
-        return Ok(());
+        return Ok(None);
     };
     let cameras = doc.cameras();
     let sized = |c: &&toml::Table| c.contains_key("width") && c.contains_key("height");
     if cameras.len() > 1 || (!cameras.is_empty() && cameras.iter().all(sized)) {
-        return Ok(());
+        return Ok(None);
     }
     let video = video.to_string();
     let probe = crate::app::video::ffmpeg::probe(&doc.base().join(&video))?;
     let flag = format!("data.video {video}: its frame size");
-    eprintln!(
+    set_cameras(doc, "width", Value::Integer(probe.width.into()), &flag)?;
+    set_cameras(doc, "height", Value::Integer(probe.height.into()), &flag)?;
+    Ok(Some(format!(
         "image size {}×{} px, from {video}",
         probe.width, probe.height
-    );
-    set_cameras(doc, "width", Value::Integer(probe.width.into()), &flag)?;
-    set_cameras(doc, "height", Value::Integer(probe.height.into()), &flag)
+    )))
 }
