@@ -164,3 +164,36 @@ pub fn read(path: &Path, target: &Target) -> Result<BoardGeometry> {
         correction_std: std,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::model::board::Method;
+    use crate::model::synthetic::{Generator, Preset};
+    use crate::solver::calibrate::{calibrate, Request};
+    use crate::solver::problem::{SolverSettings, JACOBIANS};
+
+    /// `board.json`'s σ is the calibration's covariance pass's, bit for bit,
+    /// scaled by the noise, and reading it evaluates nothing.
+    #[test]
+    fn board_json_reads_the_sigma_of_the_covariance_pass() {
+        let (dataset, _) = Generator::new(Preset::T2, Some(100), 34).generate();
+        let request = Request {
+            method: Method::Static,
+            settings: SolverSettings::default(),
+            gauge: None,
+        };
+        let c = calibrate(&dataset, &request).unwrap();
+        let before = JACOBIANS.with(|n| n.get());
+        let board = super::of(&c).unwrap();
+        assert_eq!(
+            JACOBIANS.with(|n| n.get()),
+            before,
+            "board.json evaluated again"
+        );
+        let unit = c.covariance.as_ref().unwrap().correction_std.clone();
+        assert!(unit.is_some(), "100 images keep the corrections");
+        let noise = c.assessment.trust.unwrap().noise_px;
+        let scaled = unit.map(|u| u.iter().map(|s| s.map(|v| v * noise)).collect::<Vec<_>>());
+        assert_eq!(board.correction_std, scaled);
+    }
+}

@@ -398,9 +398,9 @@ fn same_fit(a: &Calibration, b: &Calibration, what: &str) {
 
 /// A calibration whose normal matrix keeps the corrections (`static`, 100
 /// images) evaluates the Jacobian at its optimum once after its fit: its
-/// covariance pass gives Σ_θ and the board's σ, and `board.json` reads the σ
-/// without evaluating anything. Its σ is that pass's, bit for bit, scaled by
-/// the noise; with 25 images the pass eliminates the corrections and there is none.
+/// covariance pass gives Σ_θ and the board's σ; with 25 images the pass
+/// eliminates the corrections and there is none. (`app::board_json`'s tests
+/// check that `board.json` reads that σ without evaluating anything.)
 #[test]
 fn the_covariance_pass_evaluates_the_jacobian_once_for_the_intrinsics_and_the_board() {
     use crate::solver::problem::JACOBIANS;
@@ -414,12 +414,8 @@ fn the_covariance_pass_evaluates_the_jacobian_once_for_the_intrinsics_and_the_bo
         let fitted = fit(&dataset, &request).unwrap();
         let before = JACOBIANS.with(|n| n.get());
         let c = with_covariance(fitted).unwrap();
-        let board = crate::app::board_json::of(&c).unwrap();
         assert_eq!(JACOBIANS.with(|n| n.get()) - before, 1, "{images} images");
-        let unit = c.covariance.as_ref().unwrap().correction_std.clone();
+        let unit = &c.covariance.as_ref().unwrap().correction_std;
         assert_eq!(unit.is_some(), kept, "{images} images");
-        let noise = c.assessment.trust.unwrap().noise_px;
-        let scaled = unit.map(|u| u.iter().map(|s| s.map(|v| v * noise)).collect::<Vec<_>>());
-        assert_eq!(board.correction_std, scaled, "{images} images");
     }
 }
