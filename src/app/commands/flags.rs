@@ -429,13 +429,20 @@ fn cameras_from_photo_map(doc: &mut Document, file_has_cameras: bool) {
     }
     let names: Vec<String> = map.keys().cloned().collect();
     let cameras = doc.cameras();
-    let current: Vec<Option<&str>> = cameras
-        .iter()
-        .map(|c| c.get("name").and_then(Value::as_str))
-        .collect();
-    let made_by_flags = current.is_empty() || current == [Some("cam0")];
-    if made_by_flags && current != names.iter().map(|n| Some(n.as_str())).collect::<Vec<_>>() {
+    let made_by_flags = cameras.is_empty()
+        || (cameras.len() == 1 && cameras[0].get("name").and_then(Value::as_str) == Some("cam0"));
+    if made_by_flags {
         doc.cameras_named(&names, "data.photos");
+    }
+}
+
+/// Whether the document has at most one camera and it lacks an image size: the
+/// one camera a single photo pattern or a video gives its size to.
+fn one_camera_to_size(doc: &Document) -> bool {
+    match doc.cameras().as_slice() {
+        [] => true,
+        [camera] => !(camera.contains_key("width") && camera.contains_key("height")),
+        _ => false,
     }
 }
 
@@ -452,28 +459,26 @@ fn image_size_from_photos(doc: &mut Document) -> Result<Vec<String>> {
             .collect(),
         _ => return Ok(Vec::new()),
     };
-    let cameras = doc.cameras();
-    let sized = |c: &toml::Table| c.contains_key("width") && c.contains_key("height");
-    // (camera index, or every camera, and its pattern) for each camera to size.
-    let wanted: Vec<(Option<usize>, String)> = match patterns.as_slice() {
-        [(None, pattern)] if cameras.is_empty() || (cameras.len() == 1 && !sized(cameras[0])) => {
-            vec![(None, pattern.clone())]
-        }
+    // (camera index and name, or every camera, and its pattern) for each camera to size.
+    type Wanted = (Option<(usize, String)>, String);
+    let wanted: Vec<Wanted> = match patterns.as_slice() {
+        [(None, pattern)] if one_camera_to_size(doc) => vec![(None, pattern.clone())],
         [(None, _)] => Vec::new(),
-        _ => cameras
+        _ => doc
+            .cameras()
             .iter()
             .enumerate()
-            .filter(|(_, c)| !sized(c))
+            .filter(|(_, c)| !(c.contains_key("width") && c.contains_key("height")))
             .filter_map(|(i, c)| {
                 let name = c.get("name")?.as_str()?;
                 let (_, p) = patterns.iter().find(|(n, _)| n.as_deref() == Some(name))?;
-                Some((Some(i), p.clone()))
+                Some((Some((i, name.to_string())), p.clone()))
             })
             .collect(),
     };
     let base = doc.base();
     let mut read = Vec::new();
-    for (index, pattern) in wanted {
+    for (camera, pattern) in wanted {
         let names = crate::app::photos::list::matching(&base, &pattern)?;
         let Some((name, (w, h))) = names.iter().find_map(|n| {
             let size = image::image_dimensions(base.join(n)).ok()?;
@@ -485,20 +490,13 @@ fn image_size_from_photos(doc: &mut Document) -> Result<Vec<String>> {
             );
         };
         let flag = format!("data.photos {pattern}: the image size of {name}");
-        let camera = index.and_then(|i| {
-            doc.cameras()
-                .get(i)?
-                .get("name")?
-                .as_str()
-                .map(str::to_string)
-        });
         read.push(match &camera {
-            Some(c) => format!("image size {w}×{h} px for camera {c}, from {name}"),
+            Some((_, c)) => format!("image size {w}×{h} px for camera {c}, from {name}"),
             None => format!("image size {w}×{h} px, from {name}"),
         });
         for (key, value) in [("width", w), ("height", h)] {
             let path = KeyPath::Camera {
-                index,
+                index: camera.as_ref().map(|(i, _)| *i),
                 key: key.into(),
             };
             doc.set(&path, Value::Integer(value.into()), &flag)?;
@@ -513,9 +511,7 @@ fn image_size_from_video(doc: &mut Document) -> Result<Option<String>> {
     let Some(video) = doc.get("data", "video").and_then(Value::as_str) else {
         return Ok(None);
     };
-    let cameras = doc.cameras();
-    let sized = |c: &&toml::Table| c.contains_key("width") && c.contains_key("height");
-    if cameras.len() > 1 || (!cameras.is_empty() && cameras.iter().all(sized)) {
+    if !one_camera_to_size(doc) {
         return Ok(None);
     }
     let video = video.to_string();
